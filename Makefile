@@ -1,0 +1,42 @@
+# gcdt — the two commands for users are `make reproduce` and `make test`.
+SHELL := /bin/bash
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.gcdt-installed
+PYTEST_ARGS ?=
+
+.PHONY: install test lint reproduce clean help
+
+help:
+	@echo "make install    create $(VENV) from environment/ (no-op when up to date)"
+	@echo "make test       install, then run the test suite"
+	@echo "make lint       ruff over gcdt/ and tests/"
+	@echo "make reproduce  regenerate the paper's tables and figures"
+	@echo "make clean      remove caches (keeps $(VENV) and artifacts/)"
+
+install: $(STAMP)
+
+# Rebuilt only when the pins or the package metadata change.
+$(STAMP): environment/requirements.txt pyproject.toml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -r environment/requirements.txt
+	$(PY) -m pip install --quiet --no-deps -e .
+	@touch $@
+
+test: install
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+lint: install
+	$(VENV)/bin/ruff check gcdt tests
+	$(VENV)/bin/ruff format --check gcdt tests
+
+reproduce: install
+	@echo "make reproduce: the notebook pipeline (datasets, training, Table 1, Fig. 3-4) is not built yet;" >&2
+	@echo "see README 'Status'. Available now: $(VENV)/bin/gcdt evaluate --help" >&2
+	@exit 2
+
+clean:
+	rm -rf .pytest_cache .ruff_cache build *.egg-info
+	find . -name __pycache__ -type d -prune -not -path './$(VENV)/*' -exec rm -rf {} +

@@ -1,0 +1,196 @@
+"""The paper's panda-gym tasks behind one factory, plus the goal-conditioned state and rewards.
+
+Facts this module encodes (DESIGN.md §3):
+
+* panda-gym 3.0.7 re-seeds the task RNG on *every* `reset`, from OS entropy when no seed is
+  given, so a seed-less reset is never reproducible. Every episode we run is therefore reset
+  with an explicit seed from `episode_seed(seed, index)`.
+* Gymnasium sorts Dict observation keys alphabetically; the paper's state order is
+  `[observation, desired_goal, achieved_goal]` and `goal_state` builds exactly that.
+* Rewards are a pure function of (achieved_goal, desired_goal), so one trajectory yields both
+  the sparse and the dense reward (`compute_rewards`).
+* Bullet keeps contact warm-start data across resets: goals and initial positions depend only on
+  the episode seed, but the physics of an episode can differ at the 1e-4 m level depending on
+  what the same env simulated before. Runs are therefore reproducible for a given seed and a
+  given number of envs (same history per env), which is what the evaluator guarantees.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import functools
+import os
+import sys
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from typing import Literal
+
+import gymnasium as gym
+import numpy as np
+
+from gcdt.errors import GcdtError
+
+RewardType = Literal["sparse", "dense"]
+REWARDS: tuple[str, ...] = ("sparse", "dense")
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """Static facts of one panda-gym task (checked against the live env in the tests)."""
+
+    name: str  # our name, e.g. "pick_and_place"
+    env_name: str  # panda-gym's, e.g. "PandaPickAndPlace"
+    obs_dim: int  # length of obs["observation"]
+    goal_dim: int  # length of desired_goal and of achieved_goal
+    action_dim: int  # 3 = end-effector displacement, 4 = plus gripper
+    max_episode_steps: int
+    distance_threshold: float  # success iff ||achieved - desired|| < threshold
+    in_paper: bool  # one of the paper's three tasks
+
+    @property
+    def state_dim(self) -> int:
+        """Length of the goal-conditioned state `[observation, desired_goal, achieved_goal]`."""
+        return self.obs_dim + 2 * self.goal_dim
+
+
+TASKS: dict[str, TaskSpec] = {
+    t.name: t
+    for t in (
+        TaskSpec("reach", "PandaReach", 6, 3, 3, 50, 0.05, True),
+        TaskSpec("push", "PandaPush", 18, 3, 3, 50, 0.05, True),
+        TaskSpec("pick_and_place", "PandaPickAndPlace", 19, 3, 4, 50, 0.05, True),
+        TaskSpec("slide", "PandaSlide", 18, 3, 3, 50, 0.05, False),
+        TaskSpec("stack", "PandaStack", 31, 6, 4, 100, 0.1, False),
+    )
+}
+
+
+def get_task(task: str) -> TaskSpec:
+    """The spec of `task`, or a `GcdtError` listing the accepted names."""
+    try:
+        return TASKS[task]
+    except (KeyError, TypeError):
+        raise GcdtError(f"unknown task {task!r}: expected one of {', '.join(TASKS)}") from None
+
+
+def check_reward(reward: str) -> RewardType:
+    """`reward` if it is a known reward type, else a `GcdtError`."""
+    if reward not in REWARDS:
+        raise GcdtError(f"unknown reward {reward!r}: expected one of {', '.join(REWARDS)}")
+    return reward  # type: ignore[return-value]
+
+
+def env_id(task: str, reward: str) -> str:
+    """The panda-gym v3 id, e.g. `env_id("push", "dense") == "PandaPushDense-v3"`."""
+    suffix = "Dense" if check_reward(reward) == "dense" else ""
+    return f"{get_task(task).env_name}{suffix}-v3"
+
+
+# --------------------------------------------------------------------------------------------
+# Construction
+
+
+@contextlib.contextmanager
+def _native_stdout_silenced() -> Iterator[None]:
+    """Drop what C code prints to fd 1 (pybullet's banner and argv dump on every connect).
+
+    Python-level `sys.stdout` redirection cannot catch printf from C, and a JSON line printed
+    by the CLI must stay the last line of stdout, so the file descriptor itself is swapped.
+    """
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # e.g. pytest capture or a notebook
+        fd = 1
+    sys.stdout.flush()
+    saved = os.dup(fd)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), fd)
+            try:
+                yield
+            finally:
+                ctypes.CDLL(None).fflush(None)  # flush C stdio while fd 1 is still /dev/null
+                os.dup2(saved, fd)
+    finally:
+        os.close(saved)
+
+
+@functools.cache
+def _register_panda_envs() -> None:
+    with _native_stdout_silenced():
+        import panda_gym  # noqa: F401  (registers the Panda*-v3 ids with gymnasium)
+
+
+def make_env(task: str, reward: str, *, render_mode: str = "rgb_array", **kwargs) -> gym.Env:
+    """One panda-gym env for `task` and `reward` (50-step time limit, 100 for stack).
+
+    The default `render_mode="rgb_array"` is headless (pybullet DIRECT): `render()` returns
+    frames and nothing opens a window; `"human"` opens the GUI. Extra kwargs go to the
+    panda-gym constructor (e.g. `render_width`).
+    """
+    eid = env_id(task, reward)
+    _register_panda_envs()
+    with _native_stdout_silenced():
+        return gym.make(eid, render_mode=render_mode, disable_env_checker=True, **kwargs)
+
+
+def make_vec_env(
+    task: str, reward: str, n_envs: int, *, context: str | None = "spawn"
+) -> gym.vector.VectorEnv:
+    """`n_envs` copies of the env: in-process for one, one process each (`AsyncVectorEnv`) else.
+
+    Autoreset is disabled: the caller resets finished envs itself, with explicit seeds
+    (`reset(seed=[...], options={"reset_mask": done})`), because panda-gym's own seed-less
+    resets are not reproducible. Processes are spawned, not forked, so that a parent holding
+    torch or CUDA state never forks it into the workers.
+    """
+    if not isinstance(n_envs, int | np.integer) or n_envs < 1:
+        raise GcdtError(f"n_envs must be a positive integer, got {n_envs!r}")
+    env_id(task, reward)  # validate names in this process, before any worker starts
+    factory = functools.partial(make_env, task, reward)
+    mode = gym.vector.AutoresetMode.DISABLED
+    if n_envs == 1:
+        return gym.vector.SyncVectorEnv([factory], autoreset_mode=mode)
+    return gym.vector.AsyncVectorEnv([factory] * n_envs, autoreset_mode=mode, context=context)
+
+
+# --------------------------------------------------------------------------------------------
+# Seeds, states and rewards
+
+
+def episode_seed(seed: int, index: int) -> int:
+    """The reset seed of episode `index` of a run seeded with `seed`.
+
+    Derived through `SeedSequence` rather than `seed + index`, so that the episodes of runs
+    with seeds 0, 1, 2 do not overlap.
+    """
+    return int(np.random.SeedSequence(seed, spawn_key=(index,)).generate_state(1)[0])
+
+
+def goal_state(obs: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The paper's state `[observation, desired_goal, achieved_goal]`, for one obs or a batch."""
+    return np.concatenate([obs["observation"], obs["desired_goal"], obs["achieved_goal"]], axis=-1)
+
+
+def goal_distance(achieved_goal: np.ndarray, desired_goal: np.ndarray) -> np.ndarray:
+    """Euclidean distance over the last axis, in float64 as panda-gym computes it."""
+    diff = np.asarray(achieved_goal, np.float64) - np.asarray(desired_goal, np.float64)
+    return np.linalg.norm(diff, axis=-1)
+
+
+def is_success(achieved_goal: np.ndarray, desired_goal: np.ndarray, task: str) -> np.ndarray:
+    """panda-gym's success condition: distance below the task's threshold."""
+    return goal_distance(achieved_goal, desired_goal) < get_task(task).distance_threshold
+
+
+def compute_rewards(
+    achieved_goal: np.ndarray, desired_goal: np.ndarray, task: str
+) -> dict[str, np.ndarray]:
+    """Both rewards of transitions ending in `achieved_goal`: sparse (-1 / 0) and dense (-d).
+
+    Works on single transitions and on batches; float32 like the env's own rewards.
+    """
+    d = goal_distance(achieved_goal, desired_goal)
+    sparse = -(d > get_task(task).distance_threshold).astype(np.float32)
+    return {"sparse": sparse, "dense": (-d).astype(np.float32)}

@@ -1,0 +1,262 @@
+"""The one evaluator every method is measured with (experts, GC-DT, DT, BC, TQC+HER).
+
+Protocol (the authors' evaluation, DESIGN.md §3): run exactly `timesteps` env steps in total
+over the vector of envs, count every episode that finished within them and drop the unfinished
+tails; an episode succeeds if the success condition held at any of its steps; its return is the
+sum of its rewards. Alternatively, run a fixed number of whole episodes.
+
+Episode `j` of a run is always reset with `episode_seed(seed, j)` and episodes are handed to
+envs in the order they free up, so a run is deterministic for a given `seed` and `n_envs`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from gcdt.envs import check_reward, episode_seed, get_task, goal_distance, make_env, make_vec_env
+from gcdt.errors import GcdtError
+from gcdt.policies.base import Policy
+
+DEFAULT_TIMESTEPS = 10_000  # the paper's evaluation budget per (run, seed)
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """One finished episode."""
+
+    index: int  # position in the run's episode sequence
+    seed: int  # the reset seed, `episode_seed(run_seed, index)`
+    length: int  # steps taken
+    ret: float  # sum of rewards of the evaluated reward type
+    success: bool  # success condition met at any step
+    final_distance: float  # ||achieved_goal - desired_goal|| after the last step
+
+
+@dataclass
+class EvaluationResult:
+    """Per-episode records plus the summary the paper reports (mean return, success rate)."""
+
+    task: str
+    reward: str
+    seed: int
+    n_envs: int
+    policy: dict[str, Any]
+    timesteps: int  # env steps counted (= the budget in timesteps mode)
+    wall_seconds: float  # everything, env start-up included
+    stepping_seconds: float  # the stepping loop alone: the throughput measure
+    episodes: list[EpisodeRecord] = field(default_factory=list)
+
+    @property
+    def summary(self) -> dict[str, Any]:
+        """Mean return, success rate, episode count and throughput; JSON-serialisable."""
+        returns = np.array([e.ret for e in self.episodes], dtype=np.float64)
+        n = len(self.episodes)
+        return {
+            "task": self.task,
+            "reward": self.reward,
+            "policy": self.policy.get("name"),
+            "seed": self.seed,
+            "n_envs": self.n_envs,
+            "episodes": n,
+            "success_rate": float(np.mean([e.success for e in self.episodes])) if n else None,
+            "mean_return": float(returns.mean()) if n else None,
+            "std_return": float(returns.std()) if n else None,
+            "mean_length": float(np.mean([e.length for e in self.episodes])) if n else None,
+            "mean_final_distance": (
+                float(np.mean([e.final_distance for e in self.episodes])) if n else None
+            ),
+            "timesteps": self.timesteps,
+            "wall_seconds": round(self.wall_seconds, 3),
+            "steps_per_second": round(self.timesteps / max(self.stepping_seconds, 1e-9), 1),
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        """Summary, policy config and every episode record (for result JSON files)."""
+        return {
+            "summary": self.summary,
+            "policy": self.policy,
+            "episodes": [asdict(e) for e in self.episodes],
+        }
+
+
+def _positive(name: str, value: int | None) -> None:
+    if value is not None and (not isinstance(value, int | np.integer) or value < 1):
+        raise GcdtError(f"{name} must be a positive integer, got {value!r}")
+
+
+def evaluate(
+    policy: Policy,
+    task: str,
+    reward: str,
+    *,
+    timesteps: int | None = None,
+    episodes: int | None = None,
+    n_envs: int = 1,
+    seed: int = 0,
+    progress: bool = True,
+) -> EvaluationResult:
+    """Run `policy` on `task` with `reward` and measure it.
+
+    Give either `timesteps` (the paper's protocol; the default, 10,000) or `episodes` (that
+    many whole episodes, independent of their lengths). `n_envs > 1` steps envs in parallel
+    processes, and the policy sees the whole batch each step.
+    """
+    spec = get_task(task)
+    check_reward(reward)
+    if policy.task != spec.name:
+        raise GcdtError(f"policy is for task {policy.task!r}, not {spec.name!r}")
+    if timesteps is not None and episodes is not None:
+        raise GcdtError("give either timesteps or episodes, not both")
+    if timesteps is None and episodes is None:
+        timesteps = DEFAULT_TIMESTEPS
+    _positive("timesteps", timesteps)
+    _positive("episodes", episodes)
+    _positive("n_envs", n_envs)
+    if not isinstance(seed, int | np.integer) or seed < 0:
+        raise GcdtError(f"seed must be a non-negative integer, got {seed!r}")
+
+    records: list[EpisodeRecord] = []
+    started = time.perf_counter()
+    counted = 0
+    bar = tqdm(
+        total=timesteps if episodes is None else episodes,
+        unit="step" if episodes is None else "episode",
+        desc=f"evaluate {policy.name} on {task}/{reward}",
+        disable=not progress,
+        leave=False,
+    )
+    with contextlib.closing(make_vec_env(task, reward, n_envs)) as envs:
+        policy.reset(n_envs, seed)
+        episode = np.arange(n_envs)  # episode index each env is running
+        next_episode = n_envs
+        obs, _ = envs.reset(seed=[episode_seed(seed, int(j)) for j in episode])
+        ep_return = np.zeros(n_envs)
+        ep_length = np.zeros(n_envs, dtype=np.int64)
+        ep_success = np.zeros(n_envs, dtype=bool)
+        episode_start = np.ones(n_envs, dtype=bool)
+        last_reward = np.zeros(n_envs, dtype=np.float32)
+
+        stepping_started = time.perf_counter()
+        while True:
+            actions = policy.predict(obs, episode_start, last_reward)
+            obs, rew, terminated, truncated, info = envs.step(actions)
+            # In timesteps mode the last vector step may count only some envs' steps.
+            live = n_envs if episodes is not None else min(n_envs, timesteps - counted)
+            counted += live
+            ep_return += rew
+            ep_length += 1
+            ep_success |= np.asarray(info["is_success"], dtype=bool)
+            done = terminated | truncated
+            done[live:] = False  # uncounted steps never finish a counted episode
+
+            finished = np.flatnonzero(done)
+            final_distance = goal_distance(obs["achieved_goal"], obs["desired_goal"])
+            for i in finished:
+                j = int(episode[i])
+                if episodes is None or j < episodes:
+                    records.append(
+                        EpisodeRecord(
+                            index=j,
+                            seed=episode_seed(seed, j),
+                            length=int(ep_length[i]),
+                            ret=float(ep_return[i]),
+                            success=bool(ep_success[i]),
+                            final_distance=float(final_distance[i]),
+                        )
+                    )
+                    if episodes is not None:
+                        bar.update(1)
+            if episodes is None:
+                bar.update(live)
+
+            if counted >= (timesteps or 0) and episodes is None:
+                break
+            if episodes is not None and len(records) >= episodes:
+                break
+
+            if finished.size:
+                episode[finished] = next_episode + np.arange(finished.size)
+                next_episode += finished.size
+                seeds = [
+                    episode_seed(seed, int(j)) if d else None
+                    for j, d in zip(episode, done, strict=True)
+                ]
+                obs, _ = envs.reset(seed=seeds, options={"reset_mask": done})
+                ep_return[done], ep_length[done], ep_success[done] = 0.0, 0, False
+            episode_start = done
+            last_reward = np.where(done, 0.0, rew).astype(np.float32)
+        stepping_seconds = time.perf_counter() - stepping_started
+    bar.close()
+
+    records.sort(key=lambda e: e.index)
+    return EvaluationResult(
+        task=spec.name,
+        reward=reward,
+        seed=int(seed),
+        n_envs=int(n_envs),
+        policy=policy.config(),
+        timesteps=int(counted),
+        wall_seconds=time.perf_counter() - started,
+        stepping_seconds=stepping_seconds,
+        episodes=records,
+    )
+
+
+def record_rollout(
+    policy: Policy,
+    task: str,
+    reward: str,
+    seed: int = 0,
+    *,
+    path: str | Path | None = None,
+    size: int = 360,
+    fps: int = 12,
+) -> list[np.ndarray]:
+    """Render one episode headless (`rgb_array`) and, with `path`, save it as an animated GIF.
+
+    The episode is the run's episode 0 for `seed`, the same one `evaluate(seed=seed)` starts
+    with. Returns the frames, `[size, size, 3]` uint8 each.
+    """
+    from PIL import Image
+
+    check_reward(reward)
+    if policy.task != get_task(task).name:
+        raise GcdtError(f"policy is for task {policy.task!r}, not {task!r}")
+    env = make_env(task, reward, render_width=size, render_height=size)
+    try:
+        policy.reset(1, seed)
+        obs, _ = env.reset(seed=episode_seed(seed, 0))
+        frames = [env.render()]
+        start, last_reward = True, 0.0
+        while True:
+            batch = {k: v[None] for k, v in obs.items()}
+            action = policy.predict(batch, np.array([start]), np.array([last_reward]))[0]
+            obs, last_reward, terminated, truncated, _ = env.step(action)
+            frames.append(env.render())
+            start = False
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    if path is not None:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
+        tmp = path.with_name(path.name + ".tmp")
+        images[0].save(
+            tmp,
+            format="GIF",
+            save_all=True,
+            append_images=images[1:],
+            duration=int(1000 / fps),
+            loop=0,
+        )
+        tmp.replace(path)  # atomic: never a half-written GIF under the final name
+    return frames

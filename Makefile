@@ -6,12 +6,13 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.gcdt-installed
 PYTEST_ARGS ?=
 
-.PHONY: install test lint reproduce clean help
+.PHONY: install test lint bench reproduce clean help
 
 help:
 	@echo "make install    create $(VENV) from environment/ (no-op when up to date)"
 	@echo "make test       install, then run the test suite"
 	@echo "make lint       ruff over gcdt/ and tests/"
+	@echo "make bench      throughput benchmarks -> results/bench/*.json"
 	@echo "make reproduce  regenerate the paper's tables and figures"
 	@echo "make clean      remove caches (keeps $(VENV) and artifacts/)"
 
@@ -31,6 +32,11 @@ test: install
 lint: install
 	$(VENV)/bin/ruff check gcdt tests
 	$(VENV)/bin/ruff format --check gcdt tests
+
+# Speed is measured here, never in unit tests. Do not run beside other heavy jobs.
+bench: install
+	for task in reach push pick_and_place; do \
+	  $(PY) benchmarks/evaluator_throughput.py --task $$task || exit 1; done
 
 reproduce: install
 	@echo "make reproduce: the notebook pipeline (datasets, training, Table 1, Fig. 3-4) is not built yet;" >&2

@@ -9,10 +9,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 from gcdt.envs import REWARDS, TASKS
 from gcdt.errors import GcdtError
+from gcdt.paths import write_json_atomic
 
 USAGE_ERROR = 2
 
@@ -25,24 +27,23 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(USAGE_ERROR)
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
+def _int_at_least(minimum: int) -> Callable[[str], int]:
+    """An argparse type: an integer >= `minimum`, with a message that says so."""
+    wanted = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {wanted}, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected {wanted}, got {value}")
+        return value
+
+    return parse
 
 
-def _non_negative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
-    return value
+_positive_int = _int_at_least(1)
 
 
 def _build_parser() -> argparse.ArgumentParser:
@@ -72,9 +73,15 @@ def _build_parser() -> argparse.ArgumentParser:
         "--timesteps", type=_positive_int, help="env steps in total (default 10000)"
     )
     ev.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
-    ev.add_argument("--seed", type=_non_negative_int, default=0)
+    ev.add_argument("--seed", type=_int_at_least(0), default=0)
     ev.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
     ev.add_argument("--json", action="store_true", help="print the summary as one JSON line")
+    ev.add_argument(
+        "--out",
+        type=Path,
+        metavar="PATH",
+        help="also write the full result (summary, every episode, the command) as JSON",
+    )
     ev.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     ev.set_defaults(run=_evaluate)
     return parser
@@ -99,6 +106,9 @@ def _evaluate(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
     )
     summary = result.summary
+    if args.out is not None:
+        record = {"command": " ".join(["gcdt", *args.argv]), **result.to_dict()}
+        write_json_atomic(args.out, record)
     if args.json:
         print(json.dumps(summary))
     else:
@@ -116,7 +126,9 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `gcdt` console script; returns the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = _build_parser().parse_args(argv)
+    args.argv = argv  # recorded in result files: the command that made them
     try:
         return args.run(args)
     except GcdtError as err:

@@ -104,25 +104,15 @@ def test_bad_input_one_line_exit_2(capsys, args, message):
     assert message in err[0]
 
 
+def _run_module(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "gcdt", *args], capture_output=True, text=True, timeout=300
+    )
+
+
 def test_console_entry_point_no_traceback():
     """Through a real process (`python -m gcdt`): exit 2, one stderr line, no traceback."""
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "gcdt",
-            "evaluate",
-            "--policy",
-            "scripted",
-            "--task",
-            "stack",
-            "--reward",
-            "sparse",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    proc = _run_module("evaluate", "--policy", "scripted", "--task", "stack", "--reward", "sparse")
     assert proc.returncode == 2
     assert proc.stderr.strip() == (
         "gcdt: error: no scripted expert for task 'stack': scripted experts cover reach, "
@@ -133,29 +123,36 @@ def test_console_entry_point_no_traceback():
 
 def test_module_entry_point_with_parallel_envs():
     """`python -m gcdt` with spawned env workers runs once and prints one JSON last line."""
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "gcdt",
-            "evaluate",
-            "--policy",
-            "random",
-            "--task",
-            "push",
-            "--reward",
-            "sparse",
-            "--timesteps",
-            "200",
-            "--envs",
-            "2",
-            "--json",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    proc = _run_module(
+        "evaluate", "--policy", "random", "--task", "push", "--reward", "sparse",
+        "--timesteps", "200", "--envs", "2", "--json",
+    )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
     assert summary["timesteps"] == 200 and summary["n_envs"] == 2
     assert summary["episodes"] >= 4  # at least two 50-step episodes per env
+
+
+def test_evaluate_out_writes_full_result(tmp_path, capsys):
+    out = tmp_path / "runs" / "reach.json"
+    argv = [
+        "evaluate",
+        "--policy",
+        "random",
+        "--task",
+        "reach",
+        "--reward",
+        "sparse",
+        "--timesteps",
+        "120",
+        "--no-progress",
+        "--out",
+        str(out),
+    ]
+    assert main(argv) == 0
+    record = json.loads(out.read_text())
+    assert record["command"] == "gcdt " + " ".join(argv)
+    assert record["summary"]["timesteps"] == 120
+    assert len(record["episodes"]) == record["summary"]["episodes"]
+    assert sum(e["length"] for e in record["episodes"]) <= 120
+    assert [p.name for p in out.parent.iterdir()] == ["reach.json"]  # no temp file left

@@ -10,6 +10,8 @@ import pytest
 
 from gcdt.cli import main
 
+RANDOM_REACH = ["--policy", "random", "--task", "reach", "--reward", "sparse"]
+
 
 def test_evaluate_json_last_line(capsys):
     code = main(
@@ -56,30 +58,19 @@ def test_evaluate_json_last_line(capsys):
             "no scripted expert for task 'slide': scripted experts cover reach, push, ",
         ),
         (
-            ["--policy", "random", "--task", "reach", "--reward", "sparse", "--episodes", "0"],
+            [*RANDOM_REACH, "--episodes", "0"],
             "argument --episodes: expected a positive integer, got 0",
         ),
         (
-            ["--policy", "random", "--task", "reach", "--reward", "sparse", "--timesteps", "-5"],
+            [*RANDOM_REACH, "--timesteps", "-5"],
             "argument --timesteps: expected a positive integer, got -5",
         ),
         (
-            ["--policy", "random", "--task", "reach", "--reward", "sparse", "--envs", "0"],
+            [*RANDOM_REACH, "--envs", "0"],
             "argument --envs: expected a positive integer, got 0",
         ),
         (
-            [
-                "--policy",
-                "random",
-                "--task",
-                "reach",
-                "--reward",
-                "sparse",
-                "--episodes",
-                "2",
-                "--timesteps",
-                "5",
-            ],
+            [*RANDOM_REACH, "--episodes", "2", "--timesteps", "5"],
             "not allowed with argument",
         ),
         (
@@ -88,7 +79,7 @@ def test_evaluate_json_last_line(capsys):
             "existing checkpoint file",
         ),
         (
-            ["--policy", "random", "--task", "reach", "--reward", "sparse", "--noise", "0.1"],
+            [*RANDOM_REACH, "--noise", "0.1"],
             "--noise applies only to --policy scripted",
         ),
     ],
@@ -135,20 +126,7 @@ def test_module_entry_point_with_parallel_envs():
 
 def test_evaluate_out_writes_full_result(tmp_path, capsys):
     out = tmp_path / "runs" / "reach.json"
-    argv = [
-        "evaluate",
-        "--policy",
-        "random",
-        "--task",
-        "reach",
-        "--reward",
-        "sparse",
-        "--timesteps",
-        "120",
-        "--no-progress",
-        "--out",
-        str(out),
-    ]
+    argv = ["evaluate", *RANDOM_REACH, "--timesteps", "120", "--no-progress", "--out", str(out)]
     assert main(argv) == 0
     record = json.loads(out.read_text())
     assert record["command"] == "gcdt " + " ".join(argv)

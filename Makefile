@@ -11,7 +11,7 @@ PYTEST_ARGS ?=
 help:
 	@echo "make install    create $(VENV) from environment/ (no-op when up to date)"
 	@echo "make test       install, then run the test suite"
-	@echo "make lint       ruff over gcdt/ and tests/"
+	@echo "make lint       ruff over gcdt/, tests/ and benchmarks/"
 	@echo "make bench      throughput benchmarks -> results/bench/*.json"
 	@echo "make reproduce  regenerate the paper's tables and figures"
 	@echo "make clean      remove caches (keeps $(VENV) and artifacts/)"
@@ -30,8 +30,8 @@ test: install
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 lint: install
-	$(VENV)/bin/ruff check gcdt tests
-	$(VENV)/bin/ruff format --check gcdt tests
+	$(VENV)/bin/ruff check gcdt tests benchmarks
+	$(VENV)/bin/ruff format --check gcdt tests benchmarks
 
 # Speed is measured here, never in unit tests. Do not run beside other heavy jobs.
 bench: install

@@ -96,7 +96,6 @@ def main() -> None:
         },
     }
     out = REPO_ROOT / "results" / "bench" / f"evaluator_throughput_{args.task}.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out, report)
     print(json.dumps(report, indent=2))
 

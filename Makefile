@@ -36,7 +36,10 @@ lint: install
 # Speed is measured here, never in unit tests. Do not run beside other heavy jobs.
 bench: install
 	for task in reach push pick_and_place; do \
-	  $(PY) benchmarks/evaluator_throughput.py --task $$task || exit 1; done
+	  $(PY) benchmarks/evaluator_throughput.py --task $$task || exit 1; \
+	  $(PY) benchmarks/collection_throughput.py --task $$task || exit 1; done
+	$(PY) benchmarks/dataset_io.py --task push
+	$(PY) benchmarks/summary.py --readme
 
 reproduce: install
 	@echo "make reproduce: the notebook pipeline (datasets, training, Table 1, Fig. 3-4) is not built yet;" >&2

@@ -1,9 +1,9 @@
 """gcdt: Goal-Conditioned Decision Transformer for multi-goal offline RL on panda-gym.
 
 The library follows one data flow: env -> policy -> collector -> dataset -> trainer ->
-checkpoint -> evaluator -> results -> report. This release holds the first and the last
-of the online pieces: the tasks (`gcdt.envs`), the policies (`gcdt.policies`) and the
-evaluator (`gcdt.evaluation`).
+checkpoint -> evaluator -> results -> report. Built so far: the tasks (`gcdt.envs`), the
+policies (`gcdt.policies`), the stepping loop they run in (`gcdt.rollout`), the evaluator
+(`gcdt.evaluation`) and the offline datasets (`gcdt.data`).
 """
 
 from gcdt.errors import GcdtError

@@ -46,10 +46,28 @@ def _int_at_least(minimum: int) -> Callable[[str], int]:
 _positive_int = _int_at_least(1)
 
 
+def _ratio(text: str) -> float:
+    """An argparse type: a fraction within [0, 1]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text}")
+    return value
+
+
+def _npz_path(text: str) -> Path:
+    """An argparse type: an output dataset path, which must end in .npz."""
+    if not text.endswith(".npz"):
+        raise argparse.ArgumentTypeError(f"dataset paths end in .npz, got {text!r}")
+    return Path(text)
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="gcdt",
-        description="Goal-Conditioned Decision Transformer on panda-gym: evaluate policies.",
+        description="Goal-Conditioned Decision Transformer on panda-gym: datasets and evaluation.",
     )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
@@ -84,6 +102,68 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     ev.set_defaults(run=_evaluate)
+
+    co = sub.add_parser(
+        "collect",
+        help="collect an offline dataset with a policy",
+        description="Run a policy on parallel envs and save its first whole episodes that "
+        "add up to at least N transitions (both reward types are stored).",
+    )
+    co.add_argument("--policy", required=True, choices=["random", "scripted"])
+    co.add_argument("--task", required=True, choices=list(TASKS))
+    co.add_argument("--transitions", required=True, type=_positive_int, metavar="N")
+    co.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
+    co.add_argument("--seed", type=_int_at_least(0), default=0)
+    co.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
+    co.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
+    co.add_argument("--json", action="store_true", help="print the summary as one JSON line")
+    co.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    co.set_defaults(run=_collect)
+
+    ds = sub.add_parser("dataset", help="inspect, mix, subset, import and export datasets")
+    dsub = ds.add_subparsers(dest="dataset_command", required=True, parser_class=_Parser)
+    info = dsub.add_parser("info", help="summary statistics and metadata of a dataset")
+    info.add_argument("path", type=Path)
+    info.add_argument("--json", action="store_true", help="print summary and metadata as JSON")
+    info.set_defaults(run=_dataset_info)
+
+    mx = dsub.add_parser("mix", help="expert/random mixture by whole episodes (RQ5)")
+    mx.add_argument("--expert", required=True, type=Path)
+    mx.add_argument("--random", required=True, type=Path)
+    mx.add_argument("--ratio", required=True, type=_ratio, help="expert fraction in [0, 1]")
+    mx.add_argument("--size", required=True, type=_positive_int, help="transitions")
+    mx.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
+    mx.add_argument("--seed", type=_int_at_least(0), default=0)
+    mx.set_defaults(run=_dataset_mix)
+
+    sb = dsub.add_parser("subset", help="random whole episodes, about --size transitions (RQ4)")
+    sb.add_argument("path", type=Path)
+    sb.add_argument("--size", required=True, type=_positive_int, help="transitions")
+    sb.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
+    sb.add_argument("--seed", type=_int_at_least(0), default=0)
+    sb.set_defaults(run=_dataset_subset)
+
+    ex = dsub.add_parser("export-minari", help="write a dataset as a local Minari dataset")
+    ex.add_argument("path", type=Path)
+    ex.add_argument("--id", help="Minari id (default panda-gym/<task>/<policy>-v0)")
+    ex.add_argument("--reward", choices=list(REWARDS), default="sparse")
+    ex.set_defaults(run=_dataset_export_minari)
+
+    im = dsub.add_parser("import-minari", help="read a local Minari dataset")
+    im.add_argument("id")
+    im.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
+    im.set_defaults(run=_dataset_import_minari)
+
+    ia = dsub.add_parser("import-authors", help="read the authors' pickled list of episode dicts")
+    ia.add_argument("pickle", type=Path)
+    ia.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
+    ia.add_argument("--task", choices=list(TASKS), help="needed only when widths are ambiguous")
+    ia.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help="allow unpickling, which runs code from the file: only for trusted files",
+    )
+    ia.set_defaults(run=_dataset_import_authors)
     return parser
 
 
@@ -91,10 +171,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     from gcdt.evaluation import evaluate
     from gcdt.policies import make_policy
 
-    if args.noise and args.policy != "scripted":
-        raise GcdtError("--noise applies only to --policy scripted")
-    kwargs = {"noise_std": args.noise} if args.policy == "scripted" else {}
-    policy = make_policy(args.policy, args.task, **kwargs)
+    policy = make_policy(args.policy, args.task, **_scripted_kwargs(args))
     result = evaluate(
         policy,
         args.task,
@@ -121,6 +198,103 @@ def _evaluate(args: argparse.Namespace) -> int:
             if summary["episodes"]
             else f"no episode finished within {summary['timesteps']} steps"
         )
+    return 0
+
+
+def _scripted_kwargs(args: argparse.Namespace) -> dict:
+    if args.noise and args.policy != "scripted":
+        raise GcdtError("--noise applies only to --policy scripted")
+    return {"noise_std": args.noise} if args.policy == "scripted" else {}
+
+
+def _report(dataset, path: Path | None, as_json: bool) -> None:
+    """Print a dataset's summary: one JSON line, or one readable line."""
+    summary = dataset.summary()
+    if as_json:
+        print(json.dumps({"path": str(path) if path else None, **summary}))
+        return
+    where = f"{path}: " if path else ""
+    print(
+        f"{where}{summary['task']} {summary['source']} ({summary['policy']}): "
+        f"{summary['transitions']} transitions in {summary['episodes']} episodes "
+        f"(mean length {summary['mean_length']:.1f}), "
+        f"success {100 * summary['success_rate']:.1f} %, "
+        f"mean return sparse {summary['mean_return_sparse']:.2f} / "
+        f"dense {summary['mean_return_dense']:.2f}"
+    )
+
+
+def _collect(args: argparse.Namespace) -> int:
+    from gcdt.data import collect
+    from gcdt.policies import make_policy
+
+    policy = make_policy(args.policy, args.task, **_scripted_kwargs(args))
+    dataset = collect(
+        policy,
+        args.task,
+        args.transitions,
+        seed=args.seed,
+        n_envs=args.envs,
+        progress=not args.no_progress,
+    )
+    dataset = dataset.with_metadata(command=" ".join(["gcdt", *args.argv]))
+    _report(dataset, dataset.save(args.out), args.json)
+    return 0
+
+
+def _dataset_info(args: argparse.Namespace) -> int:
+    from gcdt.data import load_dataset
+
+    dataset = load_dataset(args.path)
+    if args.json:
+        print(json.dumps({"summary": dataset.summary(), "metadata": dataset.metadata}))
+    else:
+        _report(dataset, args.path, False)
+    return 0
+
+
+def _dataset_mix(args: argparse.Namespace) -> int:
+    from gcdt.data import load_dataset, mix
+
+    mixed = mix(
+        load_dataset(args.expert), load_dataset(args.random), args.ratio, args.size, args.seed
+    )
+    _report(mixed, mixed.save(args.out), False)
+    return 0
+
+
+def _dataset_subset(args: argparse.Namespace) -> int:
+    from gcdt.data import load_dataset, subset
+
+    part = subset(load_dataset(args.path), args.size, args.seed)
+    _report(part, part.save(args.out), False)
+    return 0
+
+
+def _dataset_export_minari(args: argparse.Namespace) -> int:
+    from gcdt.data import export_minari, load_dataset
+
+    exported = export_minari(load_dataset(args.path), args.id, reward=args.reward)
+    print(
+        f"exported {exported.total_steps} steps in {exported.total_episodes} episodes "
+        f"as Minari dataset {exported.spec.dataset_id!r}"
+    )
+    return 0
+
+
+def _dataset_import_minari(args: argparse.Namespace) -> int:
+    from gcdt.data import import_minari
+
+    dataset = import_minari(args.id)
+    _report(dataset, dataset.save(args.out), False)
+    return 0
+
+
+def _dataset_import_authors(args: argparse.Namespace) -> int:
+    from gcdt.data import import_authors
+
+    dataset = import_authors(args.pickle, trust_pickle=args.trust_pickle, task=args.task)
+    _report(dataset, dataset.save(args.out), False)
     return 0
 
 

@@ -11,7 +11,6 @@ envs in the order they free up, so a run is deterministic for a given `seed` and
 
 from __future__ import annotations
 
-import contextlib
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -20,9 +19,10 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from gcdt.envs import check_reward, episode_seed, get_task, goal_distance, make_env, make_vec_env
+from gcdt.envs import check_reward, episode_seed, get_task, goal_distance, make_env
 from gcdt.errors import GcdtError
 from gcdt.policies.base import Policy
+from gcdt.rollout import VectorRollout
 
 DEFAULT_TIMESTEPS = 10_000  # the paper's evaluation budget per (run, seed)
 
@@ -108,19 +108,13 @@ def evaluate(
     many whole episodes, independent of their lengths). `n_envs > 1` steps envs in parallel
     processes, and the policy sees the whole batch each step.
     """
-    spec = get_task(task)
-    check_reward(reward)
-    if policy.task != spec.name:
-        raise GcdtError(f"policy is for task {policy.task!r}, not {spec.name!r}")
     if timesteps is not None and episodes is not None:
         raise GcdtError("give either timesteps or episodes, not both")
     if timesteps is None and episodes is None:
         timesteps = DEFAULT_TIMESTEPS
     _positive("timesteps", timesteps)
     _positive("episodes", episodes)
-    _positive("n_envs", n_envs)
-    if not isinstance(seed, int | np.integer) or seed < 0:
-        raise GcdtError(f"seed must be a non-negative integer, got {seed!r}")
+    rollout = VectorRollout(policy, task, reward, n_envs, seed)  # validates the rest
 
     records: list[EpisodeRecord] = []
     started = time.perf_counter()
@@ -132,34 +126,26 @@ def evaluate(
         disable=not progress,
         leave=False,
     )
-    with contextlib.closing(make_vec_env(task, reward, n_envs)) as envs:
-        policy.reset(n_envs, seed)
-        episode = np.arange(n_envs)  # episode index each env is running
-        next_episode = n_envs
-        obs, _ = envs.reset(seed=[episode_seed(seed, int(j)) for j in episode])
-        ep_return = np.zeros(n_envs)
-        ep_length = np.zeros(n_envs, dtype=np.int64)
-        ep_success = np.zeros(n_envs, dtype=bool)
-        episode_start = np.ones(n_envs, dtype=bool)
-        last_reward = np.zeros(n_envs, dtype=np.float32)
-
-        stepping_started = time.perf_counter()
+    ep_return = np.zeros(n_envs)
+    ep_length = np.zeros(n_envs, dtype=np.int64)
+    ep_success = np.zeros(n_envs, dtype=bool)
+    with rollout:
         while True:
-            actions = policy.predict(obs, episode_start, last_reward)
-            obs, rew, terminated, truncated, info = envs.step(actions)
+            step = rollout.step()
             # In timesteps mode the last vector step may count only some envs' steps.
             live = n_envs if episodes is not None else min(n_envs, timesteps - counted)
             counted += live
-            ep_return += rew
+            ep_return += step.reward
             ep_length += 1
-            ep_success |= np.asarray(info["is_success"], dtype=bool)
-            done = terminated | truncated
+            ep_success |= step.success
+            done = step.done
             done[live:] = False  # uncounted steps never finish a counted episode
 
-            finished = np.flatnonzero(done)
-            final_distance = goal_distance(obs["achieved_goal"], obs["desired_goal"])
-            for i in finished:
-                j = int(episode[i])
+            final_distance = goal_distance(
+                step.next_obs["achieved_goal"], step.next_obs["desired_goal"]
+            )
+            for i in np.flatnonzero(done):
+                j = int(step.episode[i])
                 if episodes is None or j < episodes:
                     records.append(
                         EpisodeRecord(
@@ -175,29 +161,18 @@ def evaluate(
                         bar.update(1)
             if episodes is None:
                 bar.update(live)
+            ep_return[done], ep_length[done], ep_success[done] = 0.0, 0, False
 
-            if counted >= (timesteps or 0) and episodes is None:
+            if episodes is None and counted >= timesteps:
                 break
             if episodes is not None and len(records) >= episodes:
                 break
-
-            if finished.size:
-                episode[finished] = next_episode + np.arange(finished.size)
-                next_episode += finished.size
-                seeds = [
-                    episode_seed(seed, int(j)) if d else None
-                    for j, d in zip(episode, done, strict=True)
-                ]
-                obs, _ = envs.reset(seed=seeds, options={"reset_mask": done})
-                ep_return[done], ep_length[done], ep_success[done] = 0.0, 0, False
-            episode_start = done
-            last_reward = np.where(done, 0.0, rew).astype(np.float32)
-        stepping_seconds = time.perf_counter() - stepping_started
+        stepping_seconds = time.perf_counter() - rollout.stepping_started
     bar.close()
 
     records.sort(key=lambda e: e.index)
     return EvaluationResult(
-        task=spec.name,
+        task=rollout.task,
         reward=reward,
         seed=int(seed),
         n_envs=int(n_envs),

@@ -47,3 +47,48 @@ def zero_policy():
 @pytest.fixture
 def alternating_policy():
     return AlternatingPolicy("reach")
+
+
+def synthetic_dataset(task: str = "push", lengths=(5, 3, 7, 4), seed: int = 0):
+    """A valid Dataset built without the simulator: random states, goal-consistent rewards.
+
+    Goals are drawn close together so that some steps succeed and both reward types vary.
+    """
+    from gcdt.data import from_episodes
+    from gcdt.envs import compute_rewards, get_task, is_success
+
+    spec = get_task(task)
+    rng = np.random.default_rng(seed)
+    episodes = []
+    for e, n in enumerate(lengths):
+        desired = rng.uniform(-0.1, 0.1, spec.goal_dim).astype(np.float32)
+        achieved = (desired + rng.normal(0, 0.05, (n + 1, spec.goal_dim))).astype(np.float32)
+        obs = rng.normal(size=(n + 1, spec.obs_dim)).astype(np.float32)
+        rewards = compute_rewards(achieved[1:], np.repeat(desired[None], n, 0), task)
+        success = is_success(achieved[1:], desired, task)
+        terminated = np.zeros(n, bool)
+        terminated[-1] = success[-1]
+        episodes.append(
+            {
+                "observation": obs[:-1],
+                "desired_goal": np.repeat(desired[None], n, 0),
+                "achieved_goal": achieved[:-1],
+                "action": rng.uniform(-1, 1, (n, spec.action_dim)).astype(np.float32),
+                "reward_sparse": rewards["sparse"],
+                "reward_dense": rewards["dense"],
+                "terminated": terminated,
+                "truncated": ~terminated & (np.arange(n) == n - 1),
+                "success": success,
+                "final_observation": obs[-1],
+                "final_desired_goal": desired,
+                "final_achieved_goal": achieved[-1],
+                "episode_seed": 1000 * seed + e,
+            }
+        )
+    return from_episodes(task, episodes, {"source": "synthetic", "policy": {"name": "synth"}})
+
+
+@pytest.fixture
+def make_dataset():
+    """Factory fixture: `make_dataset(task, lengths, seed)` -> a small valid Dataset."""
+    return synthetic_dataset

@@ -85,14 +85,20 @@ def test_evaluate_json_last_line(capsys):
     ],
 )
 def test_bad_input_one_line_exit_2(capsys, args, message):
+    _assert_usage_error(capsys, ["evaluate", *args], message)
+
+
+def _assert_usage_error(capsys, argv: list[str], message: str) -> None:
+    """`gcdt argv` fails with exit status 2 and exactly one stderr line containing message."""
+    capsys.readouterr()
     with pytest.raises(SystemExit) as exc:
-        code = main(["evaluate", *args])
+        code = main(argv)
         raise SystemExit(code)
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
     assert err[0].startswith("gcdt: error: ")
-    assert message in err[0]
+    assert message in err[0], err[0]
 
 
 def _run_module(*args: str) -> subprocess.CompletedProcess:
@@ -134,3 +140,88 @@ def test_evaluate_out_writes_full_result(tmp_path, capsys):
     assert len(record["episodes"]) == record["summary"]["episodes"]
     assert sum(e["length"] for e in record["episodes"]) <= 120
     assert [p.name for p in out.parent.iterdir()] == ["reach.json"]  # no temp file left
+
+
+# --- datasets -----------------------------------------------------------------------------
+
+
+def test_dataset_commands_end_to_end(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
+    expert, rand = tmp_path / "expert.npz", tmp_path / "random.npz"
+    common = ["--task", "reach", "--no-progress", "--seed", "1"]
+    argv = ["collect", "--policy", "scripted", "--transitions", "60", "--out", str(expert)]
+    assert main([*argv, *common]) == 0
+    assert main(["collect", "--policy", "random", "--transitions", "200", "--out", str(rand),
+                 *common, "--json"]) == 0  # fmt: skip
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["transitions"] >= 200 and summary["policy"] == "random"
+
+    assert main(["dataset", "info", str(expert), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["summary"]["success_rate"] == 1.0 and info["summary"]["transitions"] >= 60
+    assert info["metadata"]["command"] == "gcdt " + " ".join([*argv, *common])
+
+    mixed = tmp_path / "mix.npz"
+    assert main(["dataset", "mix", "--expert", str(expert), "--random", str(rand),
+                 "--ratio", "0.25", "--size", "120", "--out", str(mixed)]) == 0  # fmt: skip
+    assert (
+        main(["dataset", "subset", str(rand), "--size", "100", "--out", str(tmp_path / "s.npz")])
+        == 0
+    )
+    assert main(["dataset", "export-minari", str(expert), "--id", "tests/reach-expert-v0"]) == 0
+    back = tmp_path / "back.npz"
+    assert main(["dataset", "import-minari", "tests/reach-expert-v0", "--out", str(back)]) == 0
+    out = capsys.readouterr().out
+    assert "mix (mix)" in out and "subset (random)" in out and "tests/reach-expert-v0" in out
+
+    from gcdt.data import load_dataset
+
+    assert load_dataset(back).equal_data(load_dataset(expert))
+    m = load_dataset(mixed)
+    assert abs(m.metadata["expert_transitions"] - 30) <= 50 and abs(len(m) - 120) <= 50
+
+
+@pytest.fixture
+def data_files(tmp_path, make_dataset):
+    """A push and a reach dataset on disk, plus a corrupt file and an authors' pickle."""
+    import pickle
+
+    push = make_dataset("push", lengths=(10, 10, 10))
+    push.save(tmp_path / "push.npz")
+    make_dataset("reach", lengths=(5, 5)).save(tmp_path / "reach.npz")
+    (tmp_path / "corrupt.npz").write_bytes((tmp_path / "push.npz").read_bytes()[:500])
+    (tmp_path / "data.pkl").write_bytes(pickle.dumps([]))
+    return tmp_path
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["collect", "--policy", "random", "--task", "reach", "--transitions", "0",
+          "--out", "{d}/new.npz"], "argument --transitions: expected a positive integer, got 0"),
+        (["collect", "--policy", "random", "--task", "reach", "--transitions", "5",
+          "--out", "{d}/new.h5"], "dataset paths end in .npz"),
+        (["dataset", "info", "{d}/absent.npz"], "does not exist"),
+        (["dataset", "info", "{d}/corrupt.npz"], "truncated or corrupt"),
+        (["dataset", "info", "{d}/data.pkl"], "truncated or corrupt"),
+        (["dataset", "mix", "--expert", "{d}/push.npz", "--random", "{d}/push.npz",
+          "--ratio", "1.5", "--size", "10", "--out", "{d}/new.npz"],
+         "argument --ratio: expected a number in [0, 1], got 1.5"),
+        (["dataset", "mix", "--expert", "{d}/push.npz", "--random", "{d}/reach.npz",
+          "--ratio", "0.5", "--size", "10", "--out", "{d}/new.npz"],
+         "cannot mix datasets of tasks 'push' and 'reach'"),
+        (["dataset", "subset", "{d}/push.npz", "--size", "31", "--out", "{d}/new.npz"],
+         "the subset needs 31 transitions but the dataset has only 30"),
+        (["dataset", "import-authors", "{d}/data.pkl", "--out", "{d}/new.npz"],
+         "refusing to unpickle"),
+        (["dataset", "import-authors", "{d}/data.pkl", "--out", "{d}/new.npz", "--trust-pickle"],
+         "must hold a non-empty list of episode dicts"),
+        (["dataset", "import-minari", "absent/x-v0", "--out", "{d}/new.npz"],
+         "no local Minari dataset 'absent/x-v0'"),
+    ],
+)  # fmt: skip
+def test_bad_dataset_input_exit_2_nothing_written(capsys, data_files, monkeypatch, argv, message):
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(data_files / "minari"))
+    before = sorted(p.name for p in data_files.iterdir())
+    _assert_usage_error(capsys, [a.format(d=data_files) for a in argv], message)
+    assert sorted(p.name for p in data_files.iterdir() if p.name != "minari") == before

@@ -1,0 +1,112 @@
+"""The one stepping loop behind the evaluator and the collector.
+
+`VectorRollout` runs a policy on a vector of envs and hands out episodes in index order as
+envs free up: episode `j` is always reset with `episode_seed(seed, j)`. Everything that
+varies between its users (what to count, what to record, when to stop) stays with them; the
+loop itself, the seeding and the per-env episode bookkeeping live only here.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from gcdt.envs import check_reward, episode_seed, get_task, make_vec_env
+from gcdt.errors import GcdtError
+from gcdt.policies.base import Policy
+
+
+@dataclass(frozen=True)
+class VectorStep:
+    """One step of every env. Arrays are `[n_envs, ...]`; obs dicts hold such arrays."""
+
+    episode: np.ndarray  # int64, the episode index each env was running
+    obs: dict[str, np.ndarray]  # the observation the action was taken in
+    action: np.ndarray  # float32 [n_envs, action_dim]
+    reward: np.ndarray  # the env's reward (of the rollout's reward type)
+    next_obs: dict[str, np.ndarray]  # the observation after the step, before any reset
+    terminated: np.ndarray  # bool
+    truncated: np.ndarray  # bool
+    success: np.ndarray  # bool, info["is_success"] after the step
+
+    @property
+    def done(self) -> np.ndarray:
+        return self.terminated | self.truncated
+
+
+class VectorRollout:
+    """Context manager: `with VectorRollout(policy, task, reward, n_envs, seed) as r: r.step()`.
+
+    Each `step()` advances every env once and then resets the envs whose episode ended, with
+    the next episode indices in env order. The run is deterministic for a given `seed` and
+    `n_envs` (each env then sees the same history; see `gcdt.envs` on Bullet's warm starts).
+    """
+
+    def __init__(self, policy: Policy, task: str, reward: str, n_envs: int, seed: int) -> None:
+        spec = get_task(task)
+        check_reward(reward)
+        if policy.task != spec.name:
+            raise GcdtError(f"policy is for task {policy.task!r}, not {spec.name!r}")
+        if not isinstance(n_envs, int | np.integer) or n_envs < 1:
+            raise GcdtError(f"n_envs must be a positive integer, got {n_envs!r}")
+        if not isinstance(seed, int | np.integer) or seed < 0:
+            raise GcdtError(f"seed must be a non-negative integer, got {seed!r}")
+        self.policy, self.task, self.reward = policy, spec.name, reward
+        self.n_envs, self.seed = int(n_envs), int(seed)
+        self.stepping_started = 0.0  # perf_counter() once the envs are up and reset
+
+    def __enter__(self) -> VectorRollout:
+        self.envs = make_vec_env(self.task, self.reward, self.n_envs)
+        try:
+            self.policy.reset(self.n_envs, self.seed)
+            self.episode = np.arange(self.n_envs, dtype=np.int64)
+            self.next_episode = self.n_envs
+            self.obs, _ = self.envs.reset(seed=[self.seed_of(j) for j in self.episode])
+        except BaseException:
+            self.envs.close()
+            raise
+        self.episode_start = np.ones(self.n_envs, dtype=bool)
+        self.last_reward = np.zeros(self.n_envs, dtype=np.float32)
+        self.stepping_started = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.envs.close()
+
+    def seed_of(self, episode: int) -> int:
+        """The reset seed of episode `episode` of this run."""
+        return episode_seed(self.seed, int(episode))
+
+    def step(self) -> VectorStep:
+        """Advance every env by one step (see the class docstring)."""
+        obs = self.obs
+        action = np.asarray(
+            self.policy.predict(obs, self.episode_start, self.last_reward), dtype=np.float32
+        )
+        next_obs, reward, terminated, truncated, info = self.envs.step(action)
+        step = VectorStep(
+            episode=self.episode.copy(),
+            obs=obs,
+            action=action,
+            reward=np.asarray(reward, dtype=np.float32),
+            next_obs=next_obs,
+            terminated=np.asarray(terminated, dtype=bool),
+            truncated=np.asarray(truncated, dtype=bool),
+            success=np.asarray(info["is_success"], dtype=bool),
+        )
+        done = step.done
+        self.obs = next_obs
+        if done.any():
+            finished = np.flatnonzero(done)
+            self.episode[finished] = self.next_episode + np.arange(finished.size)
+            self.next_episode += finished.size
+            seeds = [
+                self.seed_of(j) if d else None for j, d in zip(self.episode, done, strict=True)
+            ]
+            # The reset returns a fresh dict; `step.next_obs` keeps the final observations.
+            self.obs, _ = self.envs.reset(seed=seeds, options={"reset_mask": done})
+        self.episode_start = done
+        self.last_reward = np.where(done, 0.0, step.reward).astype(np.float32)
+        return step

@@ -26,11 +26,10 @@ def make_policy(policy: str, task: str, **kwargs) -> Policy:
 
 
 def load_checkpoint_policy(path: Path, task: str) -> Policy:
-    """A trained model as a policy. No checkpoint format exists in this release yet."""
-    raise GcdtError(
-        f"cannot load {str(path)!r}: this gcdt version has no trained-model checkpoints yet "
-        "(they come with gcdt.training); use --policy random or scripted"
-    )
+    """A trained GC-DT / DT / BC checkpoint (`gcdt train`) as a policy for `task`."""
+    from gcdt.policies.trained import TrainedPolicy  # imports torch: only when needed
+
+    return TrainedPolicy(path, task)
 
 
 __all__ = ["POLICY_NAMES", "Policy", "RandomPolicy", "ScriptedExpert", "make_policy"]

@@ -1,0 +1,196 @@
+"""The Goal-Conditioned Decision Transformer, its ablations, and the BC baseline.
+
+`GoalConditionedDT` follows the authors' model, HuggingFace `DecisionTransformerModel`
+(DESIGN.md §3): tokens (return-to-go, state, action) per step, a learned timestep embedding
+added to each token, LayerNorm after the embeddings, GPT-2 blocks (pre-LayerNorm, ReLU MLP of
+4x width, final LayerNorm), and the action predicted from each state token through tanh.
+Attention runs through PyTorch's scaled_dot_product_attention.
+
+`goal_conditioning` chooses what the state token holds:
+
+* `desired+achieved`: `[observation, desired_goal, achieved_goal]`, the paper's GC-DT;
+* `desired`: `[observation, desired_goal]`;
+* `none`: `[observation]`, the standard return-conditioned DT (our ablation).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from gcdt.envs import get_task
+from gcdt.errors import GcdtError
+
+GoalConditioning = Literal["desired+achieved", "desired", "none"]
+GOAL_CONDITIONINGS: tuple[str, ...] = ("desired+achieved", "desired", "none")
+
+
+def state_columns(task: str, goal_conditioning: str) -> slice:
+    """Columns of the full goal-conditioned state `[obs, desired, achieved]` a model sees."""
+    spec = get_task(task)
+    widths = {
+        "desired+achieved": spec.obs_dim + 2 * spec.goal_dim,
+        "desired": spec.obs_dim + spec.goal_dim,
+        "none": spec.obs_dim,
+    }
+    if goal_conditioning not in widths:
+        raise GcdtError(
+            f"unknown goal_conditioning {goal_conditioning!r}: expected one of "
+            f"{', '.join(GOAL_CONDITIONINGS)}"
+        )
+    return slice(0, widths[goal_conditioning])
+
+
+@dataclass(frozen=True)
+class DTConfig:
+    """The Decision Transformer's shape; defaults are the paper's."""
+
+    state_dim: int
+    action_dim: int
+    context: int = 20  # K, steps of (R, s, a) the model sees
+    hidden: int = 128
+    layers: int = 3
+    heads: int = 1
+    dropout: float = 0.1  # embedding, attention and residual dropout alike
+    max_episode_steps: int = 1000  # size of the timestep embedding table
+
+    def __post_init__(self) -> None:
+        if self.context < 1:
+            raise GcdtError(f"context K must be >= 1, got {self.context}")
+        if self.hidden % self.heads:
+            raise GcdtError(f"hidden {self.hidden} is not divisible by heads {self.heads}")
+
+
+class _Block(nn.Module):
+    """One GPT-2 block: pre-LayerNorm attention and ReLU MLP, each with a residual."""
+
+    def __init__(self, cfg: DTConfig) -> None:
+        super().__init__()
+        self.heads, self.dropout = cfg.heads, cfg.dropout
+        self.ln_1 = nn.LayerNorm(cfg.hidden)
+        self.qkv = nn.Linear(cfg.hidden, 3 * cfg.hidden)
+        self.proj = nn.Linear(cfg.hidden, cfg.hidden)
+        self.ln_2 = nn.LayerNorm(cfg.hidden)
+        self.fc = nn.Linear(cfg.hidden, 4 * cfg.hidden)
+        self.fc_proj = nn.Linear(4 * cfg.hidden, cfg.hidden)
+        self.resid_drop = nn.Dropout(cfg.dropout)
+
+    def forward(self, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        b, t, h = x.shape  # [batch, 3K, hidden]
+        q, k, v = self.qkv(self.ln_1(x)).split(h, dim=2)
+        q, k, v = (z.view(b, t, self.heads, h // self.heads).transpose(1, 2) for z in (q, k, v))
+        y = F.scaled_dot_product_attention(
+            q, k, v, attn_mask=mask, dropout_p=self.dropout if self.training else 0.0
+        )  # [batch, heads, 3K, hidden / heads]
+        x = x + self.resid_drop(self.proj(y.transpose(1, 2).reshape(b, t, h)))
+        return x + self.resid_drop(self.fc_proj(F.relu(self.fc(self.ln_2(x)))))
+
+
+class GoalConditionedDT(nn.Module):
+    """Decision Transformer over (return-to-go, state, action) tokens (see module docstring)."""
+
+    def __init__(self, cfg: DTConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self.embed_timestep = nn.Embedding(cfg.max_episode_steps, cfg.hidden)
+        self.embed_return = nn.Linear(1, cfg.hidden)
+        self.embed_state = nn.Linear(cfg.state_dim, cfg.hidden)
+        self.embed_action = nn.Linear(cfg.action_dim, cfg.hidden)
+        self.embed_ln = nn.LayerNorm(cfg.hidden)
+        self.embed_drop = nn.Dropout(cfg.dropout)
+        self.blocks = nn.ModuleList(_Block(cfg) for _ in range(cfg.layers))
+        self.ln_f = nn.LayerNorm(cfg.hidden)
+        self.predict_action = nn.Linear(cfg.hidden, cfg.action_dim)
+        self.apply(_init_weights)
+        for name, p in self.named_parameters():  # GPT-2's scaled init of residual projections
+            if name.endswith(("proj.weight", "fc_proj.weight")):
+                nn.init.normal_(p, mean=0.0, std=0.02 / math.sqrt(2 * cfg.layers))
+
+    def forward(
+        self,
+        states: torch.Tensor,  # [batch, K, state_dim], normalised
+        actions: torch.Tensor,  # [batch, K, action_dim]
+        returns_to_go: torch.Tensor,  # [batch, K, 1], scaled
+        timesteps: torch.Tensor,  # [batch, K] int64
+        mask: torch.Tensor,  # [batch, K] bool, False on left padding
+    ) -> torch.Tensor:
+        """Predicted actions `[batch, K, action_dim]`, one per state token."""
+        b, k, _ = states.shape
+        time = self.embed_timestep(timesteps)  # [batch, K, hidden]
+        tokens = torch.stack(
+            (
+                self.embed_return(returns_to_go) + time,
+                self.embed_state(states) + time,
+                self.embed_action(actions) + time,
+            ),
+            dim=2,
+        ).reshape(b, 3 * k, self.cfg.hidden)  # R_1, s_1, a_1, R_2, ...: [batch, 3K, hidden]
+        x = self.embed_drop(self.embed_ln(tokens))
+        attn_mask = _attention_mask(mask)
+        for block in self.blocks:
+            x = block(x, attn_mask)
+        x = self.ln_f(x).reshape(b, k, 3, self.cfg.hidden)
+        return torch.tanh(self.predict_action(x[:, :, 1]))  # from the state tokens
+
+
+def _attention_mask(mask: torch.Tensor) -> torch.Tensor:
+    """Boolean `[batch, 1, 3K, 3K]`: causal, and no attention to padded keys.
+
+    A padded query may still attend to itself, so that no row is fully masked (SDPA returns
+    NaN for those); padded positions' outputs are never used, real tokens never see them.
+    """
+    keys = mask.repeat_interleave(3, dim=1)  # [batch, 3K]
+    n = keys.shape[1]
+    causal = torch.ones(n, n, dtype=torch.bool, device=mask.device).tril()
+    eye = torch.eye(n, dtype=torch.bool, device=mask.device)
+    return (causal & keys[:, None, :] | eye)[:, None]
+
+
+@dataclass(frozen=True)
+class BCConfig:
+    """Behavioural cloning MLP. The paper does not describe its BC; ours maps the same
+    normalised state as the DT's to an action through tanh, with the DT's width and depth
+    (hidden 128, 3 hidden layers) and dropout, so the two differ in the sequence model alone."""
+
+    state_dim: int
+    action_dim: int
+    hidden: int = 128
+    layers: int = 3
+    dropout: float = 0.1
+
+
+class BCPolicyNet(nn.Module):
+    """MLP: normalised state -> action in [-1, 1]."""
+
+    def __init__(self, cfg: BCConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        dims = [cfg.state_dim] + [cfg.hidden] * cfg.layers
+        layers: list[nn.Module] = []
+        for d_in, d_out in itertools.pairwise(dims):
+            layers += [nn.Linear(d_in, d_out), nn.ReLU(), nn.Dropout(cfg.dropout)]
+        self.net = nn.Sequential(*layers, nn.Linear(cfg.hidden, cfg.action_dim), nn.Tanh())
+
+    def forward(self, states: torch.Tensor) -> torch.Tensor:
+        return self.net(states)
+
+
+def _init_weights(module: nn.Module) -> None:
+    """GPT-2's initialisation (as HuggingFace applies it to the Decision Transformer)."""
+    if isinstance(module, nn.Linear | nn.Embedding):
+        nn.init.normal_(module.weight, mean=0.0, std=0.02)
+        if isinstance(module, nn.Linear) and module.bias is not None:
+            nn.init.zeros_(module.bias)
+    elif isinstance(module, nn.LayerNorm):
+        nn.init.ones_(module.weight)
+        nn.init.zeros_(module.bias)
+
+
+def config_dict(cfg: DTConfig | BCConfig) -> dict[str, Any]:
+    return asdict(cfg)

@@ -1,0 +1,110 @@
+"""Trained models as policies: loaded from a checkpoint alone, batched over envs.
+
+The DT keeps a rolling, left-padded K-step context per env. Each episode starts from the
+target return-to-go (0 by default, as in the paper: "reach the goal with no further
+penalty") divided by the return scale, and every reward the env returns is subtracted
+(divided by the same scale) before the next prediction.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from gcdt.envs import goal_state
+from gcdt.errors import GcdtError
+from gcdt.models import state_columns
+from gcdt.policies.base import Policy
+from gcdt.training import build_model, load_checkpoint, method_label
+
+
+class TrainedPolicy(Policy):
+    """A DT or BC checkpoint behind the `Policy` interface."""
+
+    def __init__(
+        self,
+        checkpoint: str | Path | dict[str, Any],
+        task: str | None = None,
+        *,
+        target_return: float = 0.0,
+        device: str = "cpu",
+    ) -> None:
+        ckpt = checkpoint if isinstance(checkpoint, dict) else load_checkpoint(checkpoint)
+        self.path = None if isinstance(checkpoint, dict) else str(checkpoint)
+        if task is not None and task != ckpt["task"]:
+            raise GcdtError(f"checkpoint {self.path} is for task {ckpt['task']!r}, not {task!r}")
+        super().__init__(ckpt["task"])
+        cfg = ckpt["train_config"]
+        self.method = ckpt["method"]
+        self.name = method_label(self.method, cfg["goal_conditioning"])
+        self.cols = state_columns(self.task, cfg["goal_conditioning"])
+        self.scale = float(cfg["return_scale"])
+        self.target_return = float(target_return)
+        self.device = torch.device(device)
+        try:
+            self.model = build_model(self.method, ckpt["model_config"])
+            self.model.load_state_dict(ckpt["model"])
+        except (TypeError, RuntimeError, KeyError) as err:
+            raise GcdtError(
+                f"checkpoint {self.path} does not fit its model config ({err})"
+            ) from None
+        self.model.to(self.device).eval()
+        self.mean = ckpt["state_mean"].numpy()
+        self.std = ckpt["state_std"].numpy()
+        self.k = ckpt["model_config"].get("context", 1)
+        self.max_t = ckpt["model_config"].get("max_episode_steps", 1000) - 1
+        self.train_config, self.trained_steps = cfg, ckpt["step"]
+
+    def reset(self, n_envs: int, seed: int | None = None) -> None:
+        super().reset(n_envs, seed)
+        torch.manual_seed(0 if seed is None else seed)
+        k, d, a = self.k, self.cols.stop, self.spec.action_dim
+        self.states = torch.zeros(n_envs, k, d, device=self.device)
+        self.actions = torch.zeros(n_envs, k, a, device=self.device)
+        self.rtg = torch.zeros(n_envs, k, 1, device=self.device)
+        self.timesteps = torch.zeros(n_envs, k, dtype=torch.long, device=self.device)
+        self.mask = torch.zeros(n_envs, k, dtype=torch.bool, device=self.device)
+        self.t = np.zeros(n_envs, dtype=np.int64)
+
+    @torch.no_grad()
+    def predict(
+        self, obs: Mapping[str, np.ndarray], episode_start: np.ndarray, reward: np.ndarray
+    ) -> np.ndarray:
+        state = (goal_state(obs)[:, self.cols] - self.mean) / self.std
+        state_t = torch.as_tensor(state, dtype=torch.float32, device=self.device)
+        if self.method == "bc":
+            return self.model(state_t).cpu().numpy().astype(np.float32)
+
+        start = torch.as_tensor(np.asarray(episode_start, bool), device=self.device)
+        reward_t = torch.as_tensor(reward, dtype=torch.float32, device=self.device)
+        last_rtg = self.rtg[:, -1, 0] - reward_t / self.scale
+        rtg = torch.where(
+            start, torch.full_like(last_rtg, self.target_return / self.scale), last_rtg
+        )
+        self.t = np.where(episode_start, 0, self.t + 1)
+        for buf in (self.states, self.actions, self.rtg, self.timesteps, self.mask):
+            buf[start] = 0  # a new episode forgets the old context
+            buf[:] = torch.roll(buf, -1, dims=1)  # make room for the new step on the right
+        self.states[:, -1] = state_t
+        self.actions[:, -1] = 0.0  # placeholder: the state token comes first, it cannot see it
+        self.rtg[:, -1, 0] = rtg
+        self.timesteps[:, -1] = torch.as_tensor(np.minimum(self.t, self.max_t), device=self.device)
+        self.mask[:, -1] = True
+        action = self.model(self.states, self.actions, self.rtg, self.timesteps, self.mask)[:, -1]
+        self.actions[:, -1] = action
+        return action.cpu().numpy().astype(np.float32)
+
+    def config(self) -> dict[str, Any]:
+        return {
+            **super().config(),
+            "checkpoint": self.path,
+            "method": self.method,
+            "goal_conditioning": self.train_config["goal_conditioning"],
+            "reward": self.train_config["reward"],
+            "trained_steps": self.trained_steps,
+            "target_return": self.target_return,
+        }

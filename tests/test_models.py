@@ -1,0 +1,77 @@
+"""gcdt.models: shapes, causality, left padding, goal conditioning."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from gcdt.errors import GcdtError
+from gcdt.models import BCConfig, BCPolicyNet, DTConfig, GoalConditionedDT, state_columns
+
+
+def _inputs(b=3, k=6, d=24, a=3, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return {
+        "states": torch.randn(b, k, d, generator=g),
+        "actions": torch.rand(b, k, a, generator=g) * 2 - 1,
+        "returns_to_go": -torch.rand(b, k, 1, generator=g),
+        "timesteps": torch.arange(k).repeat(b, 1),
+        "mask": torch.ones(b, k, dtype=torch.bool),
+    }
+
+
+@pytest.fixture
+def model():
+    torch.manual_seed(0)
+    return GoalConditionedDT(DTConfig(state_dim=24, action_dim=3, context=6)).eval()
+
+
+def test_shapes_and_range(model):
+    out = model(**_inputs())
+    assert out.shape == (3, 6, 3)
+    assert out.abs().max() <= 1.0  # tanh head
+    bc = BCPolicyNet(BCConfig(state_dim=24, action_dim=4)).eval()
+    assert bc(torch.randn(5, 24)).shape == (5, 4)
+    n_params = sum(p.numel() for p in model.parameters())
+    assert 500_000 < n_params < 800_000  # 3 layers of hidden 128 + embeddings (paper config)
+
+
+def test_causal_future_tokens_do_not_change_the_past(model):
+    x = _inputs()
+    base = model(**x)
+    t = 2
+    changed = {k: v.clone() for k, v in x.items()}
+    changed["states"][:, t + 1 :] += 5.0
+    changed["actions"][:, t:] = -changed["actions"][:, t:]  # a_t comes after s_t
+    changed["returns_to_go"][:, t + 1 :] -= 3.0
+    out = model(**changed)
+    torch.testing.assert_close(out[:, : t + 1], base[:, : t + 1], rtol=0, atol=1e-6)
+    assert not torch.allclose(out[:, t + 1 :], base[:, t + 1 :])
+
+
+def test_left_padding_does_not_change_real_predictions(model):
+    full = _inputs(k=6)
+    real = 4  # the last 4 positions are real, the first 2 padding
+    short = {k: v[:, -real:].clone() for k, v in full.items()}
+    short["timesteps"] = torch.arange(real).repeat(3, 1)
+    padded = {k: v.clone() for k, v in full.items()}
+    padded["timesteps"][:, -real:] = short["timesteps"]
+    padded["mask"][:, :2] = False
+    out_short = model(**short)
+    out_padded = model(**padded)
+    torch.testing.assert_close(out_padded[:, -real:], out_short, rtol=0, atol=1e-5)
+    # Whatever the padding holds makes no difference either.
+    padded["states"][:, :2] = 100.0
+    padded["returns_to_go"][:, :2] = 7.0
+    torch.testing.assert_close(model(**padded)[:, -real:], out_short, rtol=0, atol=1e-5)
+    assert torch.isfinite(model(**padded)).all()  # fully padded rows are not NaN
+
+
+def test_goal_conditioning_columns_and_bad_config():
+    assert state_columns("push", "desired+achieved") == slice(0, 24)
+    assert state_columns("push", "desired") == slice(0, 21)
+    assert state_columns("push", "none") == slice(0, 18)
+    with pytest.raises(GcdtError, match="unknown goal_conditioning 'both'"):
+        state_columns("push", "both")
+    with pytest.raises(GcdtError, match="context K must be >= 1"):
+        DTConfig(state_dim=6, action_dim=3, context=0)

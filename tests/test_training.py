@@ -1,0 +1,151 @@
+"""gcdt.training and trained policies: sampler, resume, checkpoints, and policies that work."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from gcdt.cli import main
+from gcdt.data import collect
+from gcdt.errors import GcdtError
+from gcdt.evaluation import evaluate
+from gcdt.policies import ScriptedExpert, make_policy
+from gcdt.policies.trained import TrainedPolicy
+from gcdt.training import TrainConfig, WindowSampler, load_checkpoint, train
+
+FAST = {"log_every": 10, "checkpoint_every": 10}
+
+
+def test_window_sampler_cuts_left_padded_windows(make_dataset):
+    ds = make_dataset("reach", lengths=(3, 8, 2, 5))
+    cfg = TrainConfig(steps=1, context=4, batch_size=256)
+    mean, std = np.zeros(12, np.float32), np.ones(12, np.float32)
+    batch = WindowSampler(ds, cfg, mean, std, torch.device("cpu")).sample(np.random.default_rng(0))
+    rtg = ds.returns_to_go("sparse") / 100
+    for i in range(256):
+        mask = batch["mask"][i].numpy()
+        n = int(mask.sum())
+        assert mask.tolist() == [False] * (4 - n) + [True] * n  # left padding only
+        # The real tokens are consecutive rows of one episode, in order.
+        rows = [
+            int(np.flatnonzero((ds.states == s.numpy()).all(1))[0])
+            for s in batch["states"][i][mask]
+        ]
+        assert rows == list(range(rows[0], rows[0] + n))
+        assert len(set(ds.episode_index[rows])) == 1
+        np.testing.assert_allclose(batch["returns_to_go"][i, mask, 0].numpy(), rtg[rows], rtol=1e-6)
+        np.testing.assert_array_equal(batch["timesteps"][i, mask].numpy(), ds.timesteps[rows])
+        # A window is cut short only by its episode's end.
+        end = ds.offsets[ds.episode_index[rows[0]] + 1]
+        assert n == 4 or rows[-1] == end - 1
+        assert (batch["states"][i][~mask] == 0).all()
+
+
+def test_resumed_run_equals_uninterrupted(make_dataset, tmp_path):
+    ds = make_dataset("push", lengths=(20, 30, 25))
+    cfg = TrainConfig(steps=30, context=5, **FAST)
+    full = train(ds, cfg, tmp_path / "full", progress=False)
+    part = train(ds, cfg, tmp_path / "split", stop_after=13, progress=False)
+    assert part.steps == 13 and not load_checkpoint(part.checkpoint)["complete"]
+    resumed = train(ds, cfg, tmp_path / "split", resume=True, progress=False)
+    assert resumed.steps == 30
+    a, b = load_checkpoint(full.checkpoint), load_checkpoint(resumed.checkpoint)
+    assert a["complete"] and b["complete"]
+    for key in a["model"]:
+        torch.testing.assert_close(a["model"][key], b["model"][key], rtol=0, atol=0, msg=key)
+    assert [h["loss"] for h in a["history"]] == [h["loss"] for h in b["history"]]
+    assert (tmp_path / "full" / "train_log.csv").read_text().count("\n") == 4  # header + 3 rows
+
+    with pytest.raises(GcdtError, match="another config or task: cannot resume"):
+        train(ds, TrainConfig(steps=31, context=5, **FAST), tmp_path / "full", resume=True)
+
+
+def test_nan_loss_stops_and_keeps_last_good_checkpoint(make_dataset, tmp_path, monkeypatch):
+    import gcdt.training as training
+
+    ds = make_dataset("reach", lengths=(10, 10))
+    real_loss, calls = training._loss, {"n": 0}
+
+    def loss_turning_nan(*args):
+        calls["n"] += 1
+        loss = real_loss(*args)
+        return loss * float("nan") if calls["n"] > 12 else loss
+
+    monkeypatch.setattr(training, "_loss", loss_turning_nan)
+    with pytest.raises(GcdtError, match="loss became nan at step 12: stopped; the last good"):
+        train(ds, TrainConfig(method="bc", steps=50, **FAST), tmp_path, progress=False)
+    ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
+    assert ckpt["step"] == 10 and all(torch.isfinite(v).all() for v in ckpt["model"].values())
+
+
+def test_bad_checkpoints_and_configs(make_dataset, tmp_path):
+    ds = make_dataset("reach", lengths=(6, 6))
+    result = train(ds, TrainConfig(method="bc", steps=3), tmp_path / "bc", progress=False)
+    with pytest.raises(GcdtError, match="is for task 'reach', not 'push'"):
+        make_policy(str(result.checkpoint), "push")
+    broken = tmp_path / "broken.pt"
+    broken.write_bytes(result.checkpoint.read_bytes()[:1000])
+    with pytest.raises(GcdtError, match="not a readable gcdt checkpoint"):
+        make_policy(str(broken), "reach")
+    torch.save({"weights": torch.zeros(2)}, tmp_path / "other.pt")
+    with pytest.raises(GcdtError, match="is not a gcdt checkpoint"):
+        make_policy(str(tmp_path / "other.pt"), "reach")
+    with pytest.raises(GcdtError, match="one budget, steps or epochs, not both"):
+        TrainConfig(steps=10, epochs=2)
+    with pytest.raises(GcdtError, match="context must be a positive integer"):
+        TrainConfig(steps=10, context=0)
+    with pytest.raises(GcdtError, match="unknown method 'cql'"):
+        TrainConfig(method="cql", steps=1)
+    # The authors' epochs: ceil(#episodes / batch) steps each.
+    assert TrainConfig(epochs=3, batch_size=64).total_steps(130) == 9
+
+
+@pytest.fixture(scope="module")
+def reach_expert_data():
+    return collect(ScriptedExpert("reach"), "reach", 3000, seed=0, n_envs=1, progress=False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["dt", "bc"])
+def test_trained_policy_reaches_goals(reach_expert_data, tmp_path, method):
+    """A few hundred steps on scripted Reach expert data reach >= 90 % on fresh seeds."""
+    cfg = TrainConfig(method=method, steps=400, context=5, **FAST)  # K=5: 4x cheaper steps
+    result = train(reach_expert_data, cfg, tmp_path, progress=False)
+    policy = TrainedPolicy(result.checkpoint, "reach")
+    outcome = evaluate(policy, "reach", "sparse", episodes=60, n_envs=1, seed=12345, progress=False)
+    assert outcome.summary["success_rate"] >= 0.9, outcome.summary
+    assert policy.config()["method"] == method and policy.config()["trained_steps"] == 400
+
+
+def test_checkpoint_policy_matches_model_and_cli(reach_expert_data, tmp_path, capsys):
+    """A checkpoint alone rebuilds the policy: the CLI trains one and evaluates it."""
+    data_path = reach_expert_data.save(tmp_path / "reach.npz")
+    out = tmp_path / "run"
+    argv = ["train", "--dataset", str(data_path), "--out", str(out), "--steps", "20",
+            "--context", "5", "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    ckpt = load_checkpoint(out / "checkpoint.pt")
+    assert ckpt["train_config"]["goal_conditioning"] == "desired+achieved"
+    ckpt_arg = ["--policy", str(out / "checkpoint.pt"), "--task", "reach", "--reward", "sparse"]
+    assert main(["evaluate", *ckpt_arg, "--episodes", "3", "--json", "--no-progress"]) == 0
+    assert '"policy": "gcdt"' in capsys.readouterr().out
+
+    # Batched rollouts equal one-env rollouts: the per-env context is really per env.
+    policy = TrainedPolicy(out / "checkpoint.pt")
+    one = evaluate(policy, "reach", "sparse", episodes=4, n_envs=1, seed=3, progress=False)
+    obs = {"observation": np.zeros((2, 6), np.float32), "desired_goal": np.ones((2, 3), np.float32),
+           "achieved_goal": np.zeros((2, 3), np.float32)}  # fmt: skip
+    policy.reset(2, 0)
+    first = policy.predict(obs, np.array([True, True]), np.zeros(2))
+    np.testing.assert_allclose(first[0], first[1], rtol=0, atol=1e-6)
+    assert one.summary["episodes"] == 4
+
+
+def test_cli_train_refuses_other_task(make_dataset, tmp_path, capsys):
+    path = make_dataset("push").save(tmp_path / "push.npz")
+    code = main(["train", "--dataset", str(path), "--task", "reach", "--out", str(tmp_path / "o"),
+                 "--steps", "2"])  # fmt: skip
+    assert code == 2
+    assert "holds 'push' data, not 'reach'" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()

@@ -39,6 +39,7 @@ bench: install
 	  $(PY) benchmarks/evaluator_throughput.py --task $$task || exit 1; \
 	  $(PY) benchmarks/collection_throughput.py --task $$task || exit 1; done
 	$(PY) benchmarks/dataset_io.py --task push
+	$(PY) benchmarks/training_throughput.py
 	$(PY) benchmarks/summary.py --readme
 
 reproduce: install

@@ -125,8 +125,30 @@ def io_section() -> str | None:
     )
 
 
+def training_section() -> str | None:
+    r = _load("training_throughput")
+    if r is None:
+        return None
+    res = r["results"]
+    rows = [
+        [label, f"{res[f'{k}_ms_per_step']:.0f}", f"{res[f'{k}_samples_per_second']:.0f}",
+         f"{100 * res[f'{k}_sampler_share']:.1f} %"]
+        for k, label in (("dt_fp32", "DT, fp32"), ("dt_bf16", "DT, bf16 autocast"),
+                         ("bc_fp32", "BC, fp32"))
+    ]  # fmt: skip
+    return (
+        f"Training step, batch 64, the paper's DT config (`benchmarks/training_throughput.py`, "
+        f"{r['torch_threads']} torch threads):\n\n"
+        + _table(["model", "ms / step", "samples / s", "batch sampling share"], rows)
+    )
+
+
 def summary() -> str:
-    sections = [s for s in (evaluator_section(), collection_section(), io_section()) if s]
+    sections = [
+        s
+        for s in (evaluator_section(), collection_section(), io_section(), training_section())
+        if s
+    ]
     machine = next(
         (r["machine"] for r in map(_load, [p.stem for p in sorted(BENCH_DIR.glob("*.json"))]) if r),
         {},

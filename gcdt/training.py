@@ -236,42 +236,60 @@ def train(
         })  # fmt: skip
 
     end = total if stop_after is None else min(total, step + stop_after)
+    board = _tensorboard(out_dir)
     bar = tqdm(total=total, initial=step, desc=f"train {cfg.method} on {dataset.task}",
                disable=not progress, leave=False)  # fmt: skip
     model.train()
     started = time.perf_counter()
-    while step < end:
-        batch = sampler.sample(rng)
-        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.bf16):
-            loss = _loss(model, batch, cfg.method)
-        if not torch.isfinite(loss):
-            raise GcdtError(
-                f"training loss became {loss.item()} at step {step}: stopped; the last good "
-                f"checkpoint is {ckpt_path if ckpt_path.exists() else 'none (none written yet)'}"
-            )
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-        optimizer.step()
-        schedule.step()
-        step += 1
-        window_loss += loss.item()
-        window_steps += 1
-        bar.update(1)
-        if step % cfg.log_every == 0 or step == total:
-            history.append({
-                "step": step, "loss": window_loss / window_steps,
-                "lr": schedule.get_last_lr()[0], "seconds": time.perf_counter() - started,
-            })  # fmt: skip
-            bar.set_postfix(loss=f"{history[-1]['loss']:.4f}")
-            window_loss, window_steps = 0.0, 0
-        if step % cfg.checkpoint_every == 0 and step < end:
-            save(complete=False)
-    bar.close()
+    try:
+        while step < end:
+            batch = sampler.sample(rng)
+            with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.bf16):
+                loss = _loss(model, batch, cfg.method)
+            if not torch.isfinite(loss):
+                last = ckpt_path if ckpt_path.exists() else "none (none written yet)"
+                raise GcdtError(
+                    f"training loss became {loss.item()} at step {step}: stopped; "
+                    f"the last good checkpoint is {last}"
+                )
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+            optimizer.step()
+            schedule.step()
+            step += 1
+            window_loss += loss.item()
+            window_steps += 1
+            bar.update(1)
+            if step % cfg.log_every == 0 or step == total:
+                history.append({
+                    "step": step, "loss": window_loss / window_steps,
+                    "lr": schedule.get_last_lr()[0], "seconds": time.perf_counter() - started,
+                })  # fmt: skip
+                bar.set_postfix(loss=f"{history[-1]['loss']:.4f}")
+                if board is not None:
+                    board.add_scalar("train/loss", history[-1]["loss"], step)
+                    board.add_scalar("train/lr", history[-1]["lr"], step)
+                window_loss, window_steps = 0.0, 0
+            if step % cfg.checkpoint_every == 0 and step < end:
+                save(complete=False)
+    finally:
+        bar.close()
+        if board is not None:
+            board.close()
     save(complete=step >= total)
     _write_log(log_path, history)
     return TrainResult(ckpt_path, log_path, step, time.perf_counter() - started,
                        history[-1]["loss"] if history else float("nan"), history)  # fmt: skip
+
+
+def _tensorboard(out_dir: Path):
+    """A TensorBoard writer into `out_dir/tensorboard` when tensorboard is installed."""
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError:  # optional: the CSV log is always written
+        return None
+    return SummaryWriter(str(out_dir / "tensorboard"))
 
 
 def _write_log(path: Path, history: list[dict[str, float]]) -> None:

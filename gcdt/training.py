@@ -184,6 +184,10 @@ def train(
     """
     out_dir = Path(out_dir)
     ckpt_path, log_path = out_dir / CHECKPOINT_NAME, out_dir / LOG_NAME
+    if ckpt_path.exists() and not resume:
+        raise GcdtError(
+            f"{out_dir} already holds a checkpoint: resume it (--resume) or choose another --out"
+        )
     device = resolve_device(cfg.device)
     cols = state_columns(dataset.task, cfg.goal_conditioning)
     total = cfg.total_steps(dataset.n_episodes)

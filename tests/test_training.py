@@ -57,6 +57,8 @@ def test_resumed_run_equals_uninterrupted(make_dataset, tmp_path):
     assert [h["loss"] for h in a["history"]] == [h["loss"] for h in b["history"]]
     assert (tmp_path / "full" / "train_log.csv").read_text().count("\n") == 4  # header + 3 rows
 
+    with pytest.raises(GcdtError, match="already holds a checkpoint: resume it"):
+        train(ds, cfg, tmp_path / "full", progress=False)
     with pytest.raises(GcdtError, match="another config or task: cannot resume"):
         train(ds, TrainConfig(steps=31, context=5, **FAST), tmp_path / "full", resume=True)
 
@@ -88,6 +90,11 @@ def test_bad_checkpoints_and_configs(make_dataset, tmp_path):
     broken.write_bytes(result.checkpoint.read_bytes()[:1000])
     with pytest.raises(GcdtError, match="not a readable gcdt checkpoint"):
         make_policy(str(broken), "reach")
+    ckpt = load_checkpoint(result.checkpoint)
+    ckpt["model_config"] = {**ckpt["model_config"], "hidden": 64}  # weights are 128 wide
+    torch.save(ckpt, tmp_path / "mismatch.pt")
+    with pytest.raises(GcdtError, match="does not fit its model config"):
+        make_policy(str(tmp_path / "mismatch.pt"), "reach")
     torch.save({"weights": torch.zeros(2)}, tmp_path / "other.pt")
     with pytest.raises(GcdtError, match="is not a gcdt checkpoint"):
         make_policy(str(tmp_path / "other.pt"), "reach")

@@ -168,9 +168,13 @@ def episode_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence(seed, spawn_key=(index,)).generate_state(1)[0])
 
 
+#: The keys of a panda-gym observation dict, in the paper's state order.
+OBS_KEYS: tuple[str, str, str] = ("observation", "desired_goal", "achieved_goal")
+
+
 def goal_state(obs: Mapping[str, np.ndarray]) -> np.ndarray:
     """The paper's state `[observation, desired_goal, achieved_goal]`, for one obs or a batch."""
-    return np.concatenate([obs["observation"], obs["desired_goal"], obs["achieved_goal"]], axis=-1)
+    return np.concatenate([obs[k] for k in OBS_KEYS], axis=-1)
 
 
 def goal_distance(achieved_goal: np.ndarray, desired_goal: np.ndarray) -> np.ndarray:

@@ -18,11 +18,10 @@ import numpy as np
 
 from gcdt.data.collect import from_episodes
 from gcdt.data.dataset import Dataset, check_rewards, rewards_match
-from gcdt.envs import REWARDS, TASKS, compute_rewards, get_task, is_success
+from gcdt.envs import OBS_KEYS, REWARDS, TASKS, compute_rewards, get_task, is_success
 from gcdt.errors import GcdtError
 from gcdt.provenance import utc_now
 
-_OBS_KEYS = ("observation", "desired_goal", "achieved_goal")
 _EPISODE_KEYS = ("observations", "next_observations", "actions", "rewards", "terminals")
 
 
@@ -104,8 +103,8 @@ def _episode(ep: Any, task: str, where: str) -> tuple[dict[str, Any], list[str]]
     if not isinstance(ep, dict) or not set(_EPISODE_KEYS) <= set(ep):
         raise GcdtError(f"{where}: expected a dict with keys {', '.join(_EPISODE_KEYS)}")
     try:
-        obs = {k: np.asarray(ep["observations"][k], dtype=np.float32) for k in _OBS_KEYS}
-        nxt = {k: np.asarray(ep["next_observations"][k], dtype=np.float32) for k in _OBS_KEYS}
+        obs = {k: np.asarray(ep["observations"][k], dtype=np.float32) for k in OBS_KEYS}
+        nxt = {k: np.asarray(ep["next_observations"][k], dtype=np.float32) for k in OBS_KEYS}
         terminals = np.asarray(ep["terminals"]).astype(bool).reshape(-1)
         rewards = np.asarray(ep["rewards"], dtype=np.float64).reshape(-1)
     except (KeyError, TypeError, ValueError) as err:
@@ -115,7 +114,7 @@ def _episode(ep: Any, task: str, where: str) -> tuple[dict[str, Any], list[str]]
         raise GcdtError(
             f"{where}: observations, next_observations, rewards and terminals differ in length"
         )
-    for k in _OBS_KEYS:
+    for k in OBS_KEYS:
         if not np.array_equal(nxt[k][:-1], obs[k][1:]):
             t = int(np.flatnonzero(~(nxt[k][:-1] == obs[k][1:]).all(axis=-1))[0])
             raise GcdtError(
@@ -127,7 +126,7 @@ def _episode(ep: Any, task: str, where: str) -> tuple[dict[str, Any], list[str]]
     truncated[-1] = not terminals[-1]
     converted = {
         **obs,
-        **{f"final_{k}": nxt[k][-1] for k in _OBS_KEYS},
+        **{f"final_{k}": nxt[k][-1] for k in OBS_KEYS},
         "action": np.asarray(ep["actions"], dtype=np.float32),
         "reward_sparse": recomputed["sparse"],
         "reward_dense": recomputed["dense"],

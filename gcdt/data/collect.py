@@ -8,14 +8,12 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from gcdt.data.dataset import EPISODE_ARRAYS, TRANSITION_ARRAYS, Dataset
-from gcdt.envs import compute_rewards, env_id, get_task
+from gcdt.data.dataset import EPISODE_ARRAYS, TRANSITION_ARRAYS, Dataset, offsets_from_lengths
+from gcdt.envs import OBS_KEYS, compute_rewards, env_id, get_task
 from gcdt.errors import GcdtError
 from gcdt.policies.base import Policy
 from gcdt.provenance import package_versions, utc_now
 from gcdt.rollout import VectorRollout
-
-_OBS_KEYS = ("observation", "desired_goal", "achieved_goal")
 
 
 def collect(
@@ -59,7 +57,7 @@ def collect(
             step = rollout.step()
             for i in range(n_envs):
                 buf = running[i]
-                for key in _OBS_KEYS:
+                for key in OBS_KEYS:
                     buf[key].append(step.obs[key][i])
                 buf["action"].append(step.action[i])
                 buf["terminated"].append(step.terminated[i])
@@ -67,7 +65,7 @@ def collect(
                 buf["success"].append(step.success[i])
                 if step.done[i]:
                     j = int(step.episode[i])
-                    final = {key: step.next_obs[key][i] for key in _OBS_KEYS}
+                    final = {key: step.next_obs[key][i] for key in OBS_KEYS}
                     finished[j] = _finish_episode(buf, final, rollout.seed_of(j), spec.name)
                     running[i] = _empty_episode()
             while kept in finished and kept_steps < transitions:
@@ -95,7 +93,7 @@ def collect(
 
 
 def _empty_episode() -> dict[str, list[np.ndarray]]:
-    return {k: [] for k in (*_OBS_KEYS, "action", "terminated", "truncated", "success")}
+    return {k: [] for k in (*OBS_KEYS, "action", "terminated", "truncated", "success")}
 
 
 def _finish_episode(
@@ -126,5 +124,5 @@ def from_episodes(task: str, episodes: list[dict[str, Any]], metadata: dict[str,
         k: np.stack([np.asarray(ep[k]) for ep in episodes]).astype(dtype, copy=False)
         for k, dtype in EPISODE_ARRAYS.items()
     }
-    arrays["offsets"] = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+    arrays["offsets"] = offsets_from_lengths(lengths)
     return Dataset(task, arrays, metadata)

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from gcdt.envs import REWARDS, TASKS, TaskSpec, check_reward, get_task, goal_state
+from gcdt.envs import OBS_KEYS, REWARDS, TASKS, TaskSpec, check_reward, get_task, goal_state
 from gcdt.errors import GcdtError
 
 #: Bumped whenever the arrays or their meaning change; files of another version are refused.
@@ -152,7 +152,7 @@ class Dataset:
         """The observation after each transition, `[N, dim]` per key (finals included)."""
         last = self.offsets[1:] - 1
         out = {}
-        for key in ("observation", "desired_goal", "achieved_goal"):
+        for key in OBS_KEYS:
             nxt = np.empty_like(self.arrays[key])
             nxt[:-1] = self.arrays[key][1:]
             nxt[last] = self.arrays[f"final_{key}"]
@@ -187,7 +187,7 @@ class Dataset:
         """A new dataset of the given episodes, in the given order."""
         episodes = np.asarray(episodes, dtype=np.int64)
         lengths = self.episode_lengths[episodes]
-        offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+        offsets = offsets_from_lengths(lengths)
         # Row indices of the chosen episodes' transitions, in order, without a Python loop.
         rows = np.repeat(self.offsets[episodes] - offsets[:-1], lengths) + np.arange(offsets[-1])
         arrays = {k: self.arrays[k][rows] for k in TRANSITION_ARRAYS}
@@ -261,6 +261,11 @@ class Dataset:
             return cls(header.get("task"), arrays, header.get("metadata") or {})
         except GcdtError as err:
             raise GcdtError(f"{path}: {err}") from None
+
+
+def offsets_from_lengths(lengths: Sequence[int] | np.ndarray) -> np.ndarray:
+    """Episode offsets `[E + 1]` (int64, from 0) of episodes with these lengths."""
+    return np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
 
 
 def load_dataset(path: str | Path) -> Dataset:

@@ -20,11 +20,9 @@ import numpy as np
 
 from gcdt.data.collect import from_episodes
 from gcdt.data.dataset import SCHEMA_VERSION, Dataset, check_rewards
-from gcdt.envs import TASKS, check_reward, compute_rewards, env_id, is_success, make_env
+from gcdt.envs import OBS_KEYS, TASKS, check_reward, compute_rewards, env_id, is_success, make_env
 from gcdt.errors import GcdtError
 from gcdt.provenance import utc_now
-
-_OBS_KEYS = ("observation", "desired_goal", "achieved_goal")
 
 
 def _minari():
@@ -68,7 +66,7 @@ def export_minari(dataset: Dataset, dataset_id: str | None = None, *, reward: st
     buffers = []
     for e in range(dataset.n_episodes):
         lo, hi = int(dataset.offsets[e]), int(dataset.offsets[e + 1])
-        obs = {k: np.concatenate([a[k][lo:hi], a[f"final_{k}"][e][None]]) for k in _OBS_KEYS}
+        obs = {k: np.concatenate([a[k][lo:hi], a[f"final_{k}"][e][None]]) for k in OBS_KEYS}
         # Minari's infos have one entry per observation; the reset's is_success is unknown
         # to the dataset, so it is recorded from the initial goals.
         first = is_success(obs["achieved_goal"][0], obs["desired_goal"][0], dataset.task)
@@ -140,7 +138,7 @@ def import_minari(dataset_id: str) -> Dataset:
     episodes = []
     for e, ep in enumerate(source.iterate_episodes()):
         obs = ep.observations
-        if not isinstance(obs, dict) or set(obs) != set(_OBS_KEYS):
+        if not isinstance(obs, dict) or set(obs) != set(OBS_KEYS):
             raise GcdtError(f"Minari dataset {dataset_id!r}: observations must be panda-gym dicts")
         rewards = compute_rewards(obs["achieved_goal"][1:], obs["desired_goal"][1:], task)
         check_rewards(np.asarray(ep.rewards), rewards[reward], reward, f"episode {e}")
@@ -153,8 +151,8 @@ def import_minari(dataset_id: str) -> Dataset:
         seeds = extra.get("episode_seed")
         episodes.append(
             {
-                **{k: obs[k][:-1] for k in _OBS_KEYS},
-                **{f"final_{k}": obs[k][-1] for k in _OBS_KEYS},
+                **{k: obs[k][:-1] for k in OBS_KEYS},
+                **{f"final_{k}": obs[k][-1] for k in OBS_KEYS},
                 "action": ep.actions,
                 "reward_sparse": rewards["sparse"],
                 "reward_dense": rewards["dense"],

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gcdt.data.dataset import Dataset
+from gcdt.data.dataset import Dataset, offsets_from_lengths
 from gcdt.errors import GcdtError
 from gcdt.provenance import utc_now
 
@@ -33,7 +33,7 @@ def _draw(
             "collect a larger dataset or ask for fewer"
         )
     order = rng.permutation(dataset.n_episodes)
-    total = np.concatenate([[0], np.cumsum(dataset.episode_lengths[order])])
+    total = offsets_from_lengths(dataset.episode_lengths[order])  # length of each prefix
     count = max(minimum, int(np.argmin(np.abs(total - target))))
     return np.sort(order[:count])
 
@@ -109,7 +109,7 @@ def concatenate(parts: list[Dataset], metadata: dict) -> Dataset:
     for k in first.arrays:
         if k == "offsets":
             lengths = np.concatenate([p.episode_lengths for p in parts])
-            arrays[k] = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+            arrays[k] = offsets_from_lengths(lengths)
         else:
             arrays[k] = np.concatenate([p.arrays[k] for p in parts])
     return Dataset(first.task, arrays, metadata)

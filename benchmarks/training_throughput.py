@@ -21,7 +21,7 @@ from common import write_report
 from gcdt.data import from_episodes
 from gcdt.envs import compute_rewards
 from gcdt.models import BCConfig, DTConfig
-from gcdt.training import TrainConfig, WindowSampler, _loss, build_model
+from gcdt.training import TrainConfig, WindowSampler, build_model, train_step
 
 
 def _dataset(episodes: int = 1000, length: int = 50):
@@ -57,13 +57,7 @@ def _ms_per_step(dataset, cfg: TrainConfig, steps: int) -> tuple[float, float]:
     rng = np.random.default_rng(0)
 
     def step():
-        batch = sampler.sample(rng)
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.bf16):
-            loss = _loss(model, batch, cfg.method)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-        opt.step()
+        train_step(model, opt, sampler.sample(rng), cfg, torch.device("cpu"))
 
     for _ in range(3):
         step()

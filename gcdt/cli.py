@@ -215,7 +215,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     )
     summary = result.summary
     if args.out is not None:
-        record = {"command": " ".join(["gcdt", *args.argv]), **result.to_dict()}
+        record = {"command": _command(args), **result.to_dict()}
         write_json_atomic(args.out, record)
     if args.json:
         print(json.dumps(summary))
@@ -230,6 +230,11 @@ def _evaluate(args: argparse.Namespace) -> int:
             else f"no episode finished within {summary['timesteps']} steps"
         )
     return 0
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command line that is running, as recorded in result files and datasets."""
+    return " ".join(["gcdt", *args.argv])
 
 
 def _scripted_kwargs(args: argparse.Namespace) -> dict:
@@ -268,7 +273,7 @@ def _collect(args: argparse.Namespace) -> int:
         n_envs=args.envs,
         progress=not args.no_progress,
     )
-    dataset = dataset.with_metadata(command=" ".join(["gcdt", *args.argv]))
+    dataset = dataset.with_metadata(command=_command(args))
     _report(dataset, dataset.save(args.out), args.json)
     return 0
 

@@ -122,7 +122,9 @@ class WindowSampler:
         self.states = put(states.astype(np.float32))
         self.actions = put(dataset.actions)
         self.rtg = put(rtg.astype(np.float32))
-        self.timesteps = put(np.minimum(dataset.timesteps, 999))
+        # Episodes longer than the timestep table share its last entry, as in the policy.
+        last_timestep = DTConfig.__dataclass_fields__["max_episode_steps"].default - 1
+        self.timesteps = put(np.minimum(dataset.timesteps, last_timestep))
         self.ends = put(dataset.offsets[1:][dataset.episode_index])  # episode end of each row
         self.n, self.k, self.batch = len(dataset), cfg.context, cfg.batch_size
         self.method, self.device = cfg.method, device
@@ -153,6 +155,25 @@ def _loss(model: torch.nn.Module, batch: dict[str, torch.Tensor], method: str) -
         batch["states"], batch["actions"], batch["returns_to_go"], batch["timesteps"], batch["mask"]
     )
     return torch.mean((pred - batch["actions"])[batch["mask"]] ** 2)  # real tokens only
+
+
+def train_step(
+    model: torch.nn.Module,
+    optimizer: torch.optim.Optimizer,
+    batch: dict[str, torch.Tensor],
+    cfg: TrainConfig,
+    device: torch.device,
+) -> torch.Tensor:
+    """One optimiser step on `batch`; returns the loss. A non-finite loss updates nothing."""
+    with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.bf16):
+        loss = _loss(model, batch, cfg.method)
+    if not torch.isfinite(loss):
+        return loss
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+    optimizer.step()
+    return loss
 
 
 @dataclass
@@ -247,19 +268,13 @@ def train(
     started = time.perf_counter()
     try:
         while step < end:
-            batch = sampler.sample(rng)
-            with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.bf16):
-                loss = _loss(model, batch, cfg.method)
+            loss = train_step(model, optimizer, sampler.sample(rng), cfg, device)
             if not torch.isfinite(loss):
                 last = ckpt_path if ckpt_path.exists() else "none (none written yet)"
                 raise GcdtError(
                     f"training loss became {loss.item()} at step {step}: stopped; "
                     f"the last good checkpoint is {last}"
                 )
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-            optimizer.step()
             schedule.step()
             step += 1
             window_loss += loss.item()

@@ -143,10 +143,58 @@ def training_section() -> str | None:
     )
 
 
+def tqc_section() -> str | None:
+    speed, reach = _load("tqc_her_throughput"), _load("tqc_her_reach")
+    parts = []
+    if speed is not None:
+        rows = [
+            [name, "x".join(map(str, c["net_arch"])), c["batch_size"],
+             f"{c['learning_steps_per_second']:.1f}", f"{c['hours_for_paper_budget']:.1f}"]
+            for name, c in speed["configs"].items()
+        ]  # fmt: skip
+        parts.append(
+            f"TQC+HER training speed on {speed['task']}, env steps/s once gradient steps run "
+            "(`benchmarks/tqc_her.py throughput`; hours: the paper's step budget of that task "
+            "at this speed):\n\n"
+            + _table(["config", "networks", "batch", "env steps / s", "hours"], rows)
+        )
+    if reach is not None:
+        rows = [
+            [reward, r["env_steps"], f"{r['train_minutes']:.1f}",
+             f"{100 * r['evaluation_10k_steps']['final']['success_rate']:.1f} %",
+             f"{r['evaluation_10k_steps']['final']['mean_return']:.2f}",
+             f"{100 * r['evaluation_10k_steps']['best']['success_rate']:.1f} %"]
+            for reward, r in reach["runs"].items()
+        ]  # fmt: skip
+        parts.append(
+            f"TQC+HER on Reach, config `{reach['config']}` (`make bench-tqc`; success and "
+            "return of the final and best models under the paper's 10,000-step evaluation):"
+            "\n\n"
+            + _table(
+                [
+                    "reward",
+                    "env steps",
+                    "training min",
+                    "final success",
+                    "final return",
+                    "best success",
+                ],
+                rows,
+            )
+        )
+    return "\n\n".join(parts) or None
+
+
 def summary() -> str:
     sections = [
         s
-        for s in (evaluator_section(), collection_section(), io_section(), training_section())
+        for s in (
+            evaluator_section(),
+            collection_section(),
+            io_section(),
+            training_section(),
+            tqc_section(),
+        )
         if s
     ]
     machine = next(

@@ -12,11 +12,17 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from gcdt.baselines.tqc_her import tqc_config_names
 from gcdt.envs import REWARDS, TASKS
 from gcdt.errors import GcdtError
 from gcdt.paths import write_json_atomic
+from gcdt.policies import POLICY_SPECS
 
 USAGE_ERROR = 2
+POLICY_HELP = (
+    "a policy name, tqc:PATH of a TQC+HER zip (gcdt tqc train), or the path of a GC-DT/DT/BC "
+    "checkpoint (gcdt train)"
+)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -77,12 +83,7 @@ def _build_parser() -> argparse.ArgumentParser:
         description="Run a policy with the paper's protocol: a fixed budget of env steps "
         "(default 10,000) counting every finished episode, or a fixed number of episodes.",
     )
-    ev.add_argument(
-        "--policy",
-        required=True,
-        metavar="random|scripted|CHECKPOINT",
-        help="a policy name or the path of a trained checkpoint",
-    )
+    ev.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
     ev.add_argument("--task", required=True, choices=list(TASKS))
     ev.add_argument("--reward", required=True, choices=list(REWARDS))
     budget = ev.add_mutually_exclusive_group()
@@ -109,7 +110,7 @@ def _build_parser() -> argparse.ArgumentParser:
         description="Run a policy on parallel envs and save its first whole episodes that "
         "add up to at least N transitions (both reward types are stored).",
     )
-    co.add_argument("--policy", required=True, choices=["random", "scripted"])
+    co.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
     co.add_argument("--task", required=True, choices=list(TASKS))
     co.add_argument("--transitions", required=True, type=_positive_int, metavar="N")
     co.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
@@ -195,6 +196,34 @@ def _build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--resume", action="store_true", help="continue from --out/checkpoint.pt")
     tr.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     tr.set_defaults(run=_train)
+
+    tq = sub.add_parser("tqc", help="TQC+HER: the online baseline and the paper's expert")
+    tqsub = tq.add_subparsers(dest="tqc_command", required=True, parser_class=_Parser)
+    tt = tqsub.add_parser(
+        "train",
+        help="train TQC+HER online on one task and reward",
+        description="Train sb3-contrib TQC with HER (hyperparameters: gcdt/baselines/"
+        "tqc_her.yaml), evaluating it periodically; writes model.zip, best_model.zip, "
+        "eval.csv and run.json to --out.",
+    )
+    tt.add_argument("--task", required=True, choices=list(TASKS))
+    tt.add_argument("--reward", required=True, choices=list(REWARDS))
+    tt.add_argument("--out", required=True, type=Path, metavar="DIR")
+    tt.add_argument(
+        "--config",
+        default="paper",
+        choices=tqc_config_names(),
+        help="paper: rl-baselines3-zoo her-defaults (GPU-scale); cpu: smaller nets and batches",
+    )
+    tt.add_argument("--steps", type=_positive_int, help="env steps (default: the config's)")
+    tt.add_argument("--seed", type=_int_at_least(0), default=0)
+    tt.add_argument(
+        "--eval-every", type=_positive_int, metavar="N", help="env steps between evaluations"
+    )
+    tt.add_argument("--eval-episodes", type=_positive_int, default=20, metavar="N")
+    tt.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
+    tt.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    tt.set_defaults(run=_tqc_train)
     return parser
 
 
@@ -271,6 +300,8 @@ def _collect(args: argparse.Namespace) -> int:
         args.transitions,
         seed=args.seed,
         n_envs=args.envs,
+        # Both rewards are stored; a trained agent runs under the one it was trained with.
+        reward=policy.config().get("reward") or "sparse",
         progress=not args.no_progress,
     )
     dataset = dataset.with_metadata(command=_command(args))
@@ -357,6 +388,34 @@ def _train(args: argparse.Namespace) -> int:
     print(
         f"trained {result.steps} steps in {result.seconds:.0f} s, final loss "
         f"{result.final_loss:.4f}: {result.checkpoint}"
+    )
+    return 0
+
+
+def _tqc_train(args: argparse.Namespace) -> int:
+    from gcdt.baselines.tqc_her import load_tqc_config, train_tqc
+
+    cfg = load_tqc_config(args.config, args.task)
+    if args.steps is not None:
+        cfg = cfg.with_budget(steps=args.steps)
+    result = train_tqc(
+        args.task,
+        args.reward,
+        cfg,
+        args.out,
+        seed=args.seed,
+        eval_every=args.eval_every,
+        eval_episodes=args.eval_episodes,
+        device=args.device,
+        progress=not args.no_progress,
+        command=_command(args),
+    )
+    final = result.final_success_rate
+    print(
+        f"TQC+HER {args.task}/{args.reward} ({cfg.name}): {result.env_steps} env steps in "
+        f"{result.train_seconds:.0f} s ({result.env_steps_per_second:.1f} steps/s), "
+        f"final success {100 * final:.0f} %, best {100 * result.best_success_rate:.0f} %: "
+        f"{result.model}"
     )
     return 0
 

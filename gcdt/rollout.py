@@ -49,6 +49,12 @@ class VectorRollout:
         check_reward(reward)
         if policy.task != spec.name:
             raise GcdtError(f"policy is for task {policy.task!r}, not {spec.name!r}")
+        trained = policy.config().get("reward")  # trained agents know their reward type
+        if trained is not None and trained != reward:
+            raise GcdtError(
+                f"the {policy.name} policy was trained with {trained} rewards, not {reward}: "
+                f"run it with --reward {trained}"
+            )
         if not isinstance(n_envs, int | np.integer) or n_envs < 1:
             raise GcdtError(f"n_envs must be a positive integer, got {n_envs!r}")
         if not isinstance(seed, int | np.integer) or seed < 0:

@@ -92,3 +92,21 @@ def synthetic_dataset(task: str = "push", lengths=(5, 3, 7, 4), seed: int = 0):
 def make_dataset():
     """Factory fixture: `make_dataset(task, lengths, seed)` -> a small valid Dataset."""
     return synthetic_dataset
+
+
+@pytest.fixture
+def assert_usage_error(capsys):
+    """`check(argv, message)`: `gcdt argv` exits 2 with one stderr line containing message."""
+    from gcdt.cli import main
+
+    def check(argv: list[str], message: str) -> None:
+        capsys.readouterr()
+        with pytest.raises(SystemExit) as exc:  # argparse raises it; main() returns the code
+            raise SystemExit(main(argv))
+        assert exc.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1, err
+        assert err[0].startswith("gcdt: error: ")
+        assert message in err[0], err[0]
+
+    return check

@@ -51,7 +51,7 @@ def test_evaluate_json_last_line(capsys):
         ),
         (
             ["--policy", "expert", "--task", "reach", "--reward", "sparse"],
-            "unknown policy 'expert': expected random, scripted or the path of an existing",
+            "unknown policy 'expert': expected random, scripted, tqc:PATH of a TQC+HER zip, or the path",
         ),
         (
             ["--policy", "scripted", "--task", "slide", "--reward", "sparse"],
@@ -75,8 +75,8 @@ def test_evaluate_json_last_line(capsys):
         ),
         (
             ["--policy", "/no/such/model.pt", "--task", "reach", "--reward", "sparse"],
-            "unknown policy '/no/such/model.pt': expected random, scripted or the path of an "
-            "existing checkpoint file",
+            "unknown policy '/no/such/model.pt': expected random, scripted, tqc:PATH of a "
+            "TQC+HER zip, or the path of an existing checkpoint file",
         ),
         (
             [*RANDOM_REACH, "--noise", "0.1"],
@@ -84,21 +84,8 @@ def test_evaluate_json_last_line(capsys):
         ),
     ],
 )
-def test_bad_input_one_line_exit_2(capsys, args, message):
-    _assert_usage_error(capsys, ["evaluate", *args], message)
-
-
-def _assert_usage_error(capsys, argv: list[str], message: str) -> None:
-    """`gcdt argv` fails with exit status 2 and exactly one stderr line containing message."""
-    capsys.readouterr()
-    with pytest.raises(SystemExit) as exc:
-        code = main(argv)
-        raise SystemExit(code)
-    assert exc.value.code == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    assert err[0].startswith("gcdt: error: ")
-    assert message in err[0], err[0]
+def test_bad_input_one_line_exit_2(assert_usage_error, args, message):
+    assert_usage_error(["evaluate", *args], message)
 
 
 def _run_module(*args: str) -> subprocess.CompletedProcess:
@@ -220,8 +207,10 @@ def data_files(tmp_path, make_dataset):
          "no local Minari dataset 'absent/x-v0'"),
     ],
 )  # fmt: skip
-def test_bad_dataset_input_exit_2_nothing_written(capsys, data_files, monkeypatch, argv, message):
+def test_bad_dataset_input_exit_2_nothing_written(
+    assert_usage_error, data_files, monkeypatch, argv, message
+):
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(data_files / "minari"))
     before = sorted(p.name for p in data_files.iterdir())
-    _assert_usage_error(capsys, [a.format(d=data_files) for a in argv], message)
+    assert_usage_error([a.format(d=data_files) for a in argv], message)
     assert sorted(p.name for p in data_files.iterdir() if p.name != "minari") == before

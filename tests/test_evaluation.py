@@ -131,6 +131,13 @@ def test_policy_of_another_task_rejected(zero_policy):
         evaluate(zero_policy, "push", "sparse", timesteps=10, progress=False)
 
 
+def test_policy_trained_with_another_reward_rejected(zero_policy, monkeypatch):
+    monkeypatch.setattr(zero_policy, "config", lambda: {"name": "zero", "reward": "dense"})
+    with pytest.raises(GcdtError, match="trained with dense rewards, not sparse"):
+        evaluate(zero_policy, "reach", "sparse", timesteps=10, progress=False)
+    assert evaluate(zero_policy, "reach", "dense", timesteps=10, progress=False).timesteps == 10
+
+
 def test_record_rollout_writes_gif(tmp_path):
     path = tmp_path / "reach.gif"
     frames = record_rollout(ScriptedExpert("reach"), "reach", "sparse", seed=0, path=path, size=64)

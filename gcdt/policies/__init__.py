@@ -12,15 +12,28 @@ from gcdt.policies.scripted import ScriptedExpert
 POLICY_NAMES: dict[str, type[Policy]] = {"random": RandomPolicy, "scripted": ScriptedExpert}
 
 
+#: Prefix of a TQC+HER agent's SB3 zip in a policy spec: `tqc:runs/reach/model.zip`.
+TQC_PREFIX = "tqc:"
+POLICY_SPECS = "random|scripted|tqc:ZIP|CHECKPOINT"
+
+
 def make_policy(policy: str, task: str, **kwargs) -> Policy:
-    """A policy by name (`random`, `scripted`) or from a checkpoint path, for `task`."""
+    """The policy `policy` names, for `task`.
+
+    `policy` is `random`, `scripted`, `tqc:PATH` (a TQC+HER zip from `gcdt tqc train`) or the
+    path of a GC-DT / DT / BC checkpoint (`gcdt train`). Extra kwargs go to the named policies.
+    """
     if policy in POLICY_NAMES:
         return POLICY_NAMES[policy](task, **kwargs)
+    if policy.startswith(TQC_PREFIX):
+        from gcdt.policies.tqc import TQCPolicy  # imports SB3: only when needed
+
+        return TQCPolicy(policy.removeprefix(TQC_PREFIX), task)
     path = Path(policy)
     if not path.exists():
         raise GcdtError(
-            f"unknown policy {policy!r}: expected {', '.join(POLICY_NAMES)} "
-            "or the path of an existing checkpoint file"
+            f"unknown policy {policy!r}: expected {', '.join(POLICY_NAMES)}, "
+            f"{TQC_PREFIX}PATH of a TQC+HER zip, or the path of an existing checkpoint file"
         )
     return load_checkpoint_policy(path, task)
 
@@ -32,4 +45,12 @@ def load_checkpoint_policy(path: Path, task: str) -> Policy:
     return TrainedPolicy(path, task)
 
 
-__all__ = ["POLICY_NAMES", "Policy", "RandomPolicy", "ScriptedExpert", "make_policy"]
+__all__ = [
+    "POLICY_NAMES",
+    "POLICY_SPECS",
+    "TQC_PREFIX",
+    "Policy",
+    "RandomPolicy",
+    "ScriptedExpert",
+    "make_policy",
+]

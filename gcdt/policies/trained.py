@@ -104,7 +104,8 @@ class TrainedPolicy(Policy):
             "checkpoint": self.path,
             "method": self.method,
             "goal_conditioning": self.train_config["goal_conditioning"],
-            "reward": self.train_config["reward"],
+            # BC ignores rewards, so it runs under either; a DT's return-to-go needs its own.
+            "reward": self.train_config["reward"] if self.method == "dt" else None,
             "trained_steps": self.trained_steps,
             "target_return": self.target_return,
         }

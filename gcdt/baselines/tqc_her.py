@@ -1,0 +1,379 @@
+"""TQC+HER, the paper's online baseline and the source of its expert datasets.
+
+sb3-contrib's `TQC` with Stable-Baselines3's `HerReplayBuffer` on one panda-gym env. The
+hyperparameters live in `tqc_her.yaml` next to this file (`paper` = rl-baselines3-zoo's
+her-defaults); a config or a profile may change budget-related values only, and every run
+records what it changed. During training the project's own evaluator measures the current
+policy every `eval_every` env steps (success rate and return -> `eval.csv`, for learning
+curves); the best and the last model are saved as SB3 zips that carry the task, reward and
+config they were trained with, and `run.json` records the wall-clock time and env steps/s.
+
+Output folder: `model.zip` (last), `best_model.zip`, `eval.csv`, `run.json`.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from gcdt.envs import check_reward, get_task
+from gcdt.errors import GcdtError
+from gcdt.paths import write_json_atomic
+from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_now
+
+CONFIG_FILE = Path(__file__).with_name("tqc_her.yaml")
+#: Values a config other than `paper`, or a profile, may change: the compute budget only.
+BUDGET_KEYS = ("steps", "net_arch", "batch_size", "buffer_size", "learning_starts")
+RUN_FILES = ("model.zip", "best_model.zip", "eval.csv", "run.json")
+EVAL_FIELDS = (
+    "env_steps",
+    "train_seconds",
+    "wall_seconds",
+    "success_rate",
+    "mean_return",
+    "episodes",
+)
+#: Evaluation episodes during training use seeds apart from those of `gcdt evaluate --seed 0`.
+EVAL_SEED_OFFSET = 1000
+
+
+@dataclass(frozen=True)
+class TQCConfig:
+    """TQC+HER hyperparameters for one task (see `tqc_her.yaml` for their source)."""
+
+    name: str  # the config in tqc_her.yaml
+    task: str
+    steps: int  # env steps of training
+    buffer_size: int
+    batch_size: int
+    gamma: float
+    learning_rate: float
+    tau: float
+    learning_starts: int  # random-action steps before the first gradient step
+    ent_coef: str | float  # "auto": learned entropy coefficient
+    train_freq: int
+    gradient_steps: int
+    net_arch: tuple[int, ...]  # hidden layers of the actor and of each critic
+    n_critics: int
+    n_sampled_goal: int  # HER: relabelled goals per real one
+    goal_selection_strategy: str  # HER: "future", "final" or "episode"
+    #: Budget values this config changed relative to `paper`: {key: [paper, this]}.
+    overrides: dict[str, list[Any]] = field(default_factory=dict)
+
+    def with_budget(self, **changes: Any) -> TQCConfig:
+        """This config with budget values changed (e.g. by `--steps` or a profile), recorded."""
+        unknown = sorted(set(changes) - set(BUDGET_KEYS))
+        if unknown:
+            raise GcdtError(
+                f"{', '.join(unknown)} is not a budget value; a TQC+HER config may change "
+                f"only {', '.join(BUDGET_KEYS)}"
+            )
+        values = {k: _budget_value(k, v) for k, v in changes.items()}
+        paper = load_tqc_config("paper", self.task) if self.name != "paper" else self
+        overrides = dict(self.overrides)
+        for key, value in values.items():
+            base = getattr(paper, key)
+            if value != base:
+                overrides[key] = [_plain(base), _plain(value)]
+            else:
+                overrides.pop(key, None)
+        return dataclasses.replace(self, **values, overrides=overrides)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: _plain(v) for k, v in dataclasses.asdict(self).items()}
+
+
+def _plain(value: Any) -> Any:
+    return list(value) if isinstance(value, tuple) else value
+
+
+def _budget_value(key: str, value: Any) -> Any:
+    """A checked budget value: positive integers, or a non-empty tuple of them for net_arch."""
+    if key == "net_arch":
+        layers = tuple(value) if isinstance(value, list | tuple) else ()
+        if not layers or not all(isinstance(n, int) and n > 0 for n in layers):
+            raise GcdtError(f"net_arch must be a list of positive layer sizes, got {value!r}")
+        return layers
+    minimum = 0 if key == "learning_starts" else 1
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise GcdtError(f"{key} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def tqc_config_names() -> list[str]:
+    """The configs defined in tqc_her.yaml."""
+    return list(_read_yaml())
+
+
+def _read_yaml() -> dict[str, dict[str, Any]]:
+    with open(CONFIG_FILE) as f:
+        return yaml.safe_load(f)
+
+
+def load_tqc_config(name: str, task: str) -> TQCConfig:
+    """Config `name` of tqc_her.yaml for `task`: `paper`, or `paper` with budget changes."""
+    spec = get_task(task)
+    configs = _read_yaml()
+    if name not in configs:
+        raise GcdtError(f"unknown TQC+HER config {name!r}: expected one of {', '.join(configs)}")
+    paper = dict(configs["paper"])
+    paper_cfg = TQCConfig(
+        name="paper",
+        task=spec.name,
+        steps=int(paper.pop("steps")[spec.name]),
+        net_arch=tuple(paper.pop("net_arch")),
+        **paper,
+    )
+    if name == "paper":
+        return paper_cfg
+    changes = dict(configs[name])
+    if "steps" in changes:
+        changes["steps"] = changes["steps"][spec.name]
+    return dataclasses.replace(paper_cfg, name=name).with_budget(**changes)
+
+
+# --------------------------------------------------------------------------------------------
+# Training
+
+
+@dataclass(frozen=True)
+class TQCResult:
+    """Where a run's files are and what it measured."""
+
+    out_dir: Path
+    model: Path
+    best_model: Path
+    env_steps: int
+    train_seconds: float  # learning alone (environment steps and gradient steps)
+    wall_seconds: float  # everything, periodic evaluation included
+    #: Env steps/s once gradient steps run (after `learning_starts` random-action steps):
+    #: the rate that decides how long a full-budget run takes.
+    learning_steps_per_second: float | None
+    best_success_rate: float | None
+    final_success_rate: float | None
+
+    @property
+    def env_steps_per_second(self) -> float:
+        return self.env_steps / max(self.train_seconds, 1e-9)
+
+
+def train_tqc(
+    task: str,
+    reward: str,
+    cfg: TQCConfig,
+    out_dir: str | Path,
+    *,
+    seed: int = 0,
+    eval_every: int | None = None,
+    eval_episodes: int = 20,
+    device: str = "auto",
+    progress: bool = True,
+    command: str | None = None,
+) -> TQCResult:
+    """Train TQC+HER on `task` with `reward`; write the run's files to `out_dir`.
+
+    The current policy is evaluated with `gcdt.evaluation.evaluate` on `eval_episodes`
+    episodes every `eval_every` env steps (default: 10 times per run) and once at the end.
+    """
+    spec = get_task(task)
+    check_reward(reward)
+    if cfg.task != spec.name:
+        raise GcdtError(f"the TQC+HER config is for task {cfg.task!r}, not {spec.name!r}")
+    eval_every = eval_every if eval_every is not None else max(cfg.steps // 10, 1)
+    for name, value in (("eval_every", eval_every), ("eval_episodes", eval_episodes)):
+        _budget_value(name, value)
+    if not isinstance(seed, int) or seed < 0:
+        raise GcdtError(f"seed must be a non-negative integer, got {seed!r}")
+    out = Path(out_dir)
+    taken = [name for name in RUN_FILES if (out / name).exists()]
+    if taken:
+        raise GcdtError(f"{out} already holds a TQC+HER run ({taken[0]}); choose another --out")
+
+    from sb3_contrib import TQC  # heavy imports only once the input is known to be good
+    from stable_baselines3 import HerReplayBuffer
+
+    from gcdt.envs import make_env
+
+    out.mkdir(parents=True, exist_ok=True)
+    model = TQC(
+        "MultiInputPolicy",
+        make_env(spec.name, reward),
+        buffer_size=cfg.buffer_size,
+        batch_size=cfg.batch_size,
+        gamma=cfg.gamma,
+        learning_rate=cfg.learning_rate,
+        tau=cfg.tau,
+        learning_starts=cfg.learning_starts,
+        ent_coef=cfg.ent_coef,
+        train_freq=cfg.train_freq,
+        gradient_steps=cfg.gradient_steps,
+        replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs={
+            "n_sampled_goal": cfg.n_sampled_goal,
+            "goal_selection_strategy": cfg.goal_selection_strategy,
+        },
+        policy_kwargs={"net_arch": list(cfg.net_arch), "n_critics": cfg.n_critics},
+        seed=seed,
+        device=device,
+        verbose=0,
+    )
+    # Travels inside every saved zip: what `load_tqc_policy` checks a model against.
+    model.gcdt = {"task": spec.name, "reward": reward, "config": cfg.name, "seed": seed}
+    evaluator = _PeriodicEvaluation(
+        model, out, spec.name, reward, eval_every, eval_episodes, seed + EVAL_SEED_OFFSET
+    )
+    started = time.perf_counter()
+    model.learn(cfg.steps, callback=evaluator.callback(cfg.steps, cfg.learning_starts, progress))
+    learning_rate = evaluator.learning_rate()
+    if evaluator.last_step != model.num_timesteps:
+        evaluator.run()  # the final policy is always measured
+    wall = time.perf_counter() - started
+    _save_zip(model, out / "model.zip")
+    model.get_env().close()
+    train_seconds = wall - evaluator.seconds
+    result = TQCResult(
+        out_dir=out,
+        model=out / "model.zip",
+        best_model=out / "best_model.zip",
+        env_steps=int(model.num_timesteps),
+        train_seconds=train_seconds,
+        wall_seconds=wall,
+        learning_steps_per_second=learning_rate,
+        best_success_rate=evaluator.best[0] if evaluator.rows else None,
+        final_success_rate=evaluator.rows[-1]["success_rate"] if evaluator.rows else None,
+    )
+    write_json_atomic(
+        out / "run.json",
+        {
+            "task": spec.name,
+            "reward": reward,
+            "seed": seed,
+            "config": cfg.to_dict(),
+            "overrides": cfg.overrides,
+            "device": str(model.device),
+            "eval_every": eval_every,
+            "eval_episodes": eval_episodes,
+            "eval_seed": seed + EVAL_SEED_OFFSET,
+            "env_steps": result.env_steps,
+            "train_seconds": round(train_seconds, 2),
+            "eval_seconds": round(evaluator.seconds, 2),
+            "wall_seconds": round(wall, 2),
+            "env_steps_per_second": round(result.env_steps_per_second, 2),
+            "learning_steps_per_second": learning_rate and round(learning_rate, 2),
+            "best": evaluator.best_row,
+            "final": evaluator.rows[-1] if evaluator.rows else None,
+            "command": command,
+            "created": utc_now(),
+            "git_commit": git_commit(),
+            "versions": package_versions((*TRACKED_PACKAGES, "stable-baselines3", "sb3-contrib")),
+        },
+    )
+    return result
+
+
+def _save_zip(model: Any, path: Path) -> None:
+    """`model.save` through a temp file and a rename: a reader never sees half a zip."""
+    tmp = path.with_name(f".{path.stem}.partial.zip")
+    try:
+        model.save(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+class _PeriodicEvaluation:
+    """Measures the live policy with the project's evaluator; keeps the best model on disk."""
+
+    def __init__(
+        self,
+        model: Any,
+        out: Path,
+        task: str,
+        reward: str,
+        every: int,
+        episodes: int,
+        seed: int,
+    ) -> None:
+        self.model, self.out, self.task, self.reward = model, out, task, reward
+        self.every, self.episodes, self.seed = every, episodes, seed
+        self.rows: list[dict[str, Any]] = []
+        self.best: tuple[float, float] = (-np.inf, -np.inf)  # (success rate, mean return)
+        self.best_row: dict[str, Any] | None = None
+        self.seconds = 0.0  # time spent evaluating, excluded from the training speed
+        self.last_step = -1
+        self.started = time.perf_counter()
+        self.learning_mark: tuple[int, float, float] | None = None  # (step, clock, eval s)
+        with open(out / "eval.csv", "w", newline="") as f:
+            csv.writer(f).writerow(EVAL_FIELDS)
+
+    def run(self) -> None:
+        from gcdt.evaluation import evaluate
+        from gcdt.policies.tqc import TQCPolicy
+
+        began = time.perf_counter()
+        policy = TQCPolicy(self.model.policy, self.task, meta=self.model.gcdt)
+        result = evaluate(
+            policy, self.task, self.reward, episodes=self.episodes, seed=self.seed, progress=False
+        )
+        summary = result.summary
+        row = {
+            "env_steps": int(self.model.num_timesteps),
+            "train_seconds": round(began - self.started - self.seconds, 2),
+            "wall_seconds": round(began - self.started, 2),
+            "success_rate": summary["success_rate"],
+            "mean_return": summary["mean_return"],
+            "episodes": summary["episodes"],
+        }
+        self.rows.append(row)
+        self.last_step = row["env_steps"]
+        with open(self.out / "eval.csv", "a", newline="") as f:
+            csv.DictWriter(f, EVAL_FIELDS).writerow(row)
+        score = (row["success_rate"], row["mean_return"])
+        if score > self.best:
+            self.best, self.best_row = score, row
+            _save_zip(self.model, self.out / "best_model.zip")
+        self.seconds += time.perf_counter() - began
+
+    def mark_learning_start(self) -> None:
+        self.learning_mark = (self.model.num_timesteps, time.perf_counter(), self.seconds)
+
+    def learning_rate(self) -> float | None:
+        """Env steps/s since `mark_learning_start`, evaluations excluded (None if unmarked)."""
+        if self.learning_mark is None or self.model.num_timesteps <= self.learning_mark[0]:
+            return None
+        step, clock, eval_seconds = self.learning_mark
+        seconds = time.perf_counter() - clock - (self.seconds - eval_seconds)
+        return (self.model.num_timesteps - step) / max(seconds, 1e-9)
+
+    def callback(self, total: int, learning_starts: int, progress: bool) -> Any:
+        from stable_baselines3.common.callbacks import BaseCallback
+        from tqdm.auto import tqdm
+
+        evaluation = self
+
+        class _Callback(BaseCallback):
+            def _on_training_start(self) -> None:
+                self.bar = tqdm(total=total, desc="TQC+HER", unit="step", disable=not progress)
+
+            def _on_step(self) -> bool:
+                self.bar.update(self.training_env.num_envs)
+                if self.num_timesteps == max(learning_starts, 1):  # gradient steps follow
+                    evaluation.mark_learning_start()
+                if self.num_timesteps % evaluation.every == 0:
+                    evaluation.run()
+                    self.bar.set_postfix(success=evaluation.rows[-1]["success_rate"])
+                return True
+
+            def _on_training_end(self) -> None:
+                self.bar.close()
+
+        return _Callback()

@@ -1,0 +1,196 @@
+"""TQC+HER: configs from the YAML, a short real training run, its zip as a policy, bad input.
+
+Reaching >= 95 % success on Reach is measured by `benchmarks/tqc_her.py` (about 15 min per
+reward on 2 cores: too long for the default suite).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from gcdt.baselines.tqc_her import RUN_FILES, load_tqc_config, tqc_config_names, train_tqc
+from gcdt.cli import main
+from gcdt.data import load_dataset
+from gcdt.envs import make_env
+from gcdt.errors import GcdtError
+from gcdt.evaluation import evaluate
+from gcdt.policies import make_policy
+
+
+def test_paper_config_is_rl_zoo_her_defaults():
+    cfg = load_tqc_config("paper", "push")
+    assert (cfg.buffer_size, cfg.batch_size, cfg.learning_starts) == (1_000_000, 2048, 1000)
+    assert (cfg.gamma, cfg.learning_rate, cfg.tau) == (0.95, 1e-3, 0.05)
+    assert (cfg.net_arch, cfg.n_critics) == ((512, 512, 512), 2)
+    assert (cfg.n_sampled_goal, cfg.goal_selection_strategy) == (4, "future")
+    assert cfg.steps == 1_000_000 and cfg.overrides == {}
+    assert load_tqc_config("paper", "reach").steps == 20_000
+    assert {"paper", "cpu"} <= set(tqc_config_names())
+
+
+def test_cpu_config_records_what_it_changed():
+    cfg = load_tqc_config("cpu", "reach")
+    assert cfg.overrides == {
+        "batch_size": [2048, 256],
+        "net_arch": [[512, 512, 512], [256, 256]],
+        "steps": [20_000, 10_000],
+    }
+    shorter = cfg.with_budget(steps=500)
+    assert shorter.steps == 500 and shorter.overrides["steps"] == [20_000, 500]
+    assert shorter.gamma == cfg.gamma  # everything else stays the paper's
+    assert "steps" not in shorter.with_budget(steps=20_000).overrides  # back to the paper's
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"gamma": 0.9}, "gamma is not a budget value"),
+        ({"steps": 0}, "steps must be an integer >= 1"),
+        ({"steps": -5}, "steps must be an integer >= 1"),
+        ({"net_arch": []}, "net_arch must be a list of positive layer sizes"),
+    ],
+)
+def test_only_valid_budget_changes(changes, message):
+    with pytest.raises(GcdtError, match=message):
+        load_tqc_config("paper", "reach").with_budget(**changes)
+
+
+def test_unknown_config_name():
+    with pytest.raises(GcdtError, match="unknown TQC\\+HER config 'gpu'"):
+        load_tqc_config("gpu", "reach")
+
+
+@pytest.fixture(scope="module")
+def push_run(tmp_path_factory):
+    """A few hundred steps of real TQC+HER training on Push (a smoke run, not a good agent)."""
+    out = tmp_path_factory.mktemp("tqc") / "push"
+    cfg = load_tqc_config("cpu", "push").with_budget(
+        steps=300, learning_starts=100, batch_size=32, net_arch=[32, 32], buffer_size=2000
+    )
+    result = train_tqc("push", "sparse", cfg, out, eval_every=150, eval_episodes=2, progress=False)
+    return result
+
+
+def test_smoke_run_writes_models_curve_and_record(push_run):
+    out = push_run.out_dir
+    assert sorted(p.name for p in out.iterdir()) == sorted(RUN_FILES)
+    with open(out / "eval.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["env_steps"]) for r in rows] == [150, 300]
+    assert all(int(r["episodes"]) == 2 for r in rows)
+    run = json.loads((out / "run.json").read_text())
+    assert run["env_steps"] == push_run.env_steps == 300
+    assert run["overrides"]["steps"] == [1_000_000, 300]
+    assert run["config"]["batch_size"] == 32 and run["reward"] == "sparse"
+    assert 0 < run["train_seconds"] <= run["wall_seconds"]
+    assert run["env_steps_per_second"] > 0
+    assert run["final"]["env_steps"] == 300
+    assert run["final"]["success_rate"] == float(rows[-1]["success_rate"])
+
+
+def test_zip_is_a_policy_acting_like_sb3s_own_loader(push_run):
+    from sb3_contrib import TQC
+
+    policy = make_policy(f"tqc:{push_run.model}", "push")
+    assert policy.config()["reward"] == "sparse" and policy.name == "tqc"
+    env = make_env("push", "sparse")
+    try:
+        sb3_model = TQC.load(push_run.model, env=env, device="cpu")
+        obs, _ = env.reset(seed=3)
+        batch = {k: np.repeat(v[None], 2, axis=0) for k, v in obs.items()}
+        ours = policy.predict(batch, np.ones(2, bool), np.zeros(2, np.float32))
+        theirs, _ = sb3_model.predict(batch, deterministic=True)
+    finally:
+        env.close()
+    assert ours.shape == (2, 3) and ours.dtype == np.float32
+    np.testing.assert_allclose(ours, theirs, atol=1e-6)
+    assert np.abs(ours).max() <= 1.0
+    best = make_policy(f"tqc:{push_run.best_model}", "push")
+    result = evaluate(best, "push", "sparse", episodes=2, progress=False)
+    assert result.summary["episodes"] == 2
+
+
+def test_collect_with_a_tqc_expert(push_run, tmp_path, capsys):
+    out = tmp_path / "tqc_push.npz"
+    argv = ["collect", "--policy", f"tqc:{push_run.model}", "--task", "push",
+            "--transitions", "120", "--out", str(out), "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    dataset = load_dataset(out)
+    assert dataset.task == "push" and dataset.summary()["transitions"] >= 120
+    assert dataset.metadata["policy"]["name"] == "tqc"
+    assert dataset.metadata["policy"]["path"] == str(push_run.model)
+
+
+@pytest.fixture(scope="module")
+def foreign_zips(tmp_path_factory, push_run):
+    """SB3 zips gcdt did not write: a SAC agent, and a TQC agent on Reach without metadata."""
+    from sb3_contrib import TQC
+    from stable_baselines3 import SAC
+
+    out = tmp_path_factory.mktemp("foreign")
+    env = make_env("reach", "sparse")
+    try:
+        kwargs = {"buffer_size": 100, "policy_kwargs": {"net_arch": [8]}, "device": "cpu"}
+        SAC("MultiInputPolicy", env, **kwargs).save(out / "sac.zip")
+        TQC("MultiInputPolicy", env, **kwargs).save(out / "tqc_reach.zip")
+    finally:
+        env.close()
+    (out / "garbage.zip").write_bytes(b"not a zip at all")
+    data = push_run.model.read_bytes()
+    (out / "truncated.zip").write_bytes(data[: len(data) // 2])
+    return out
+
+
+@pytest.mark.parametrize(
+    ("policy", "task", "reward", "message"),
+    [
+        ("{run}/model.zip", "reach", "sparse", "was trained on task 'push', not 'reach'"),
+        ("{run}/model.zip", "push", "dense", "trained with sparse rewards, not dense"),
+        ("{foreign}/tqc_reach.zip", "push", "sparse", "it was trained on another task"),
+        ("{foreign}/sac.zip", "reach", "sparse", "not a TQC policy"),
+        ("{foreign}/garbage.zip", "push", "sparse", "not a readable SB3 TQC model zip"),
+        ("{foreign}/truncated.zip", "push", "sparse", "not a readable SB3 TQC model zip"),
+        ("{foreign}/absent.zip", "push", "sparse", "no TQC model at"),
+    ],
+)
+def test_bad_zip_one_line_exit_2(
+    assert_usage_error, push_run, foreign_zips, policy, task, reward, message
+):
+    spec = "tqc:" + policy.format(run=push_run.out_dir, foreign=foreign_zips)
+    argv = ["evaluate", "--policy", spec, "--task", task, "--reward", reward, "--episodes", "1"]
+    assert_usage_error(argv, message)
+
+
+def test_foreign_tqc_zip_for_its_own_task_is_a_policy(foreign_zips):
+    policy = make_policy(f"tqc:{foreign_zips / 'tqc_reach.zip'}", "reach")
+    assert policy.config()["reward"] is None  # no gcdt metadata: runs under either reward
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--config", "gpu"], "argument --config: invalid choice: 'gpu'"),
+        (["--steps", "0"], "expected a positive integer, got 0"),
+        (["--steps", "-5"], "expected a positive integer, got -5"),
+        (["--eval-episodes", "0"], "expected a positive integer, got 0"),
+    ],
+)
+def test_bad_train_input_exit_2_nothing_written(assert_usage_error, tmp_path, extra, message):
+    out = tmp_path / "run"
+    argv = ["tqc", "train", "--task", "reach", "--reward", "sparse", "--out", str(out), *extra]
+    assert_usage_error(argv, message)
+    assert not out.exists()
+
+
+def test_train_refuses_a_folder_holding_a_run(assert_usage_error, push_run, tmp_path):
+    out = tmp_path / "run"
+    shutil.copytree(push_run.out_dir, out)
+    before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
+    argv = ["tqc", "train", "--task", "push", "--reward", "sparse", "--out", str(out)]
+    assert_usage_error(argv, "already holds a TQC+HER run")
+    assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before

@@ -15,6 +15,9 @@ from pathlib import Path
 from gcdt.baselines.tqc_her import tqc_config_names
 from gcdt.envs import REWARDS, TASKS
 from gcdt.errors import GcdtError
+from gcdt.experiments.grid import SECTIONS
+from gcdt.experiments.profiles import PROFILES
+from gcdt.experiments.sweep import BACKENDS
 from gcdt.paths import write_json_atomic
 from gcdt.policies import POLICY_SPECS
 
@@ -224,6 +227,23 @@ def _build_parser() -> argparse.ArgumentParser:
     tt.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
     tt.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     tt.set_defaults(run=_tqc_train)
+
+    sw = sub.add_parser(
+        "sweep",
+        help="run the experiment grid of a profile (skips finished runs)",
+        description="Run every run of a profile's grid whose result is not in "
+        "results/PROFILE/runs/ yet; failed and untrusted results are run again.",
+    )
+    sw.add_argument("--profile", required=True, choices=list(PROFILES))
+    sw.add_argument("--backend", default="local", choices=list(BACKENDS))
+    sw.add_argument("--address", help="Ray cluster address HOST:PORT (default: a local Ray)")
+    sw.add_argument("--only", choices=list(SECTIONS), help="one section of the grid")
+    sw.add_argument("--workers", type=_positive_int, help="parallel runs (default: cores)")
+    sw.add_argument(
+        "--dry-run", action="store_true", help="list the runs, their state and estimated cost"
+    )
+    sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    sw.set_defaults(run=_sweep)
     return parser
 
 
@@ -418,6 +438,41 @@ def _tqc_train(args: argparse.Namespace) -> int:
         f"{result.model}"
     )
     return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from gcdt.experiments import get_profile, plan, results_dir, sweep
+    from gcdt.experiments.store import RunStore
+    from gcdt.experiments.sweep import default_workers, shared_cost
+
+    profile = get_profile(args.profile)
+    if args.dry_run:
+        planned, warnings = plan(profile, RunStore(results_dir(profile.name) / "runs"), args.only)
+        for warning in warnings:
+            print(f"warning: {warning}", file=sys.stderr)
+        for p in planned:
+            print(f"{p.key}  {p.state:<8} {p.estimate_seconds / 60:8.1f} min  "
+                  f"{p.entry.spec.label}  [{', '.join(p.entry.sections)}]")  # fmt: skip
+        todo = [p for p in planned if p.state != "done"]
+        workers = args.workers or default_workers(profile)
+        total = sum(p.estimate_seconds for p in todo) + shared_cost(todo)
+        print(
+            f"{len(planned)} runs, {len(todo)} to run: about {total / 3600:.1f} h of work, "
+            f"{total / 3600 / workers:.1f} h on {workers} worker(s) (estimate)"
+        )
+        return 0
+    summary = sweep(
+        profile,
+        backend=args.backend,
+        address=args.address,
+        only=args.only,
+        workers=args.workers,
+        progress=not args.no_progress,
+    )
+    for warning in summary.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    print(summary.line())
+    return 0 if summary.ok else 1
 
 
 def main(argv: Sequence[str] | None = None) -> int:

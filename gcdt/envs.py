@@ -168,6 +168,23 @@ def episode_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence(seed, spawn_key=(index,)).generate_state(1)[0])
 
 
+class SeededResets(gym.Wrapper):
+    """Resets episode `i` with `episode_seed(seed, i)`, whatever seed the caller passes.
+
+    For learners that reset their env themselves (SB3 resets seed-less after the first
+    episode), so that their episodes, and hence their runs, are reproducible.
+    """
+
+    def __init__(self, env: gym.Env, seed: int) -> None:
+        super().__init__(env)
+        self.base_seed, self.episodes = int(seed), 0
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        seed = episode_seed(self.base_seed, self.episodes)
+        self.episodes += 1
+        return self.env.reset(seed=seed, options=options)
+
+
 #: The keys of a panda-gym observation dict, in the paper's state order.
 OBS_KEYS: tuple[str, str, str] = ("observation", "desired_goal", "achieved_goal")
 

@@ -51,7 +51,7 @@ def test_evaluate_json_last_line(capsys):
         ),
         (
             ["--policy", "expert", "--task", "reach", "--reward", "sparse"],
-            "unknown policy 'expert': expected random, scripted, tqc:PATH of a TQC+HER zip, or the path",
+            "unknown policy 'expert': expected random, scripted, tqc:PATH of a TQC+HER zip",
         ),
         (
             ["--policy", "scripted", "--task", "slide", "--reward", "sparse"],

@@ -9,6 +9,7 @@ import pytest
 
 from gcdt.envs import (
     TASKS,
+    SeededResets,
     compute_rewards,
     env_id,
     episode_seed,
@@ -178,3 +179,15 @@ def test_vec_env_factory():
         envs.close()
     with pytest.raises(GcdtError, match="n_envs must be a positive integer"):
         make_vec_env("reach", "sparse", 0)
+
+
+def test_seeded_resets_make_seedless_resets_reproducible():
+    goals = []
+    for _ in range(2):
+        env = SeededResets(make_env("push", "sparse"), seed=7)
+        try:
+            goals.append([env.reset()[0]["desired_goal"] for _ in range(3)])
+        finally:
+            env.close()
+    np.testing.assert_array_equal(goals[0], goals[1])
+    assert not np.array_equal(goals[0][0], goals[0][1])  # a new goal each episode

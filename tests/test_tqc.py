@@ -194,3 +194,15 @@ def test_train_refuses_a_folder_holding_a_run(assert_usage_error, push_run, tmp_
     argv = ["tqc", "train", "--task", "push", "--reward", "sparse", "--out", str(out)]
     assert_usage_error(argv, "already holds a TQC+HER run")
     assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before
+
+
+def test_training_is_reproducible(tmp_path):
+    cfg = load_tqc_config("cpu", "reach").with_budget(
+        steps=150, learning_starts=50, batch_size=16, net_arch=[16]
+    )
+    weights = []
+    for run in ("a", "b"):
+        result = train_tqc("reach", "dense", cfg, tmp_path / run, seed=3, eval_every=150,
+                           eval_episodes=1, progress=False)  # fmt: skip
+        weights.append(make_policy(f"tqc:{result.model}", "reach").sb3_policy.state_dict())
+    assert all(np.array_equal(weights[0][k], weights[1][k]) for k in weights[0])

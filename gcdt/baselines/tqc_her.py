@@ -200,12 +200,12 @@ def train_tqc(
     from sb3_contrib import TQC  # heavy imports only once the input is known to be good
     from stable_baselines3 import HerReplayBuffer
 
-    from gcdt.envs import make_env
+    from gcdt.envs import SeededResets, make_env
 
     out.mkdir(parents=True, exist_ok=True)
     model = TQC(
         "MultiInputPolicy",
-        make_env(spec.name, reward),
+        SeededResets(make_env(spec.name, reward), seed),  # reproducible training episodes
         buffer_size=cfg.buffer_size,
         batch_size=cfg.batch_size,
         gamma=cfg.gamma,

@@ -1,0 +1,95 @@
+"""Content-keyed artifacts shared by the runs of a sweep: datasets, TQC agents, checkpoints.
+
+Each artifact lives under `<artifacts>/grid/` at a path named by the hash of the spec that
+makes it, so every run that needs the same dataset (or agent) uses one copy, made once. An
+exclusive file lock per artifact stops two workers (processes or Ray tasks on one machine, or
+nodes sharing the folder) from making it twice; each is written atomically, so a killed
+worker leaves no half artifact behind. The sparse and dense variants of a task share one
+collection (both rewards are stored).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+from collections.abc import Iterator
+from pathlib import Path
+
+from gcdt.data import Dataset, collect, load_dataset, mix, subset
+from gcdt.experiments.grid import DataSpec, RunSpec, TQCSpec
+from gcdt.paths import artifacts_dir
+
+
+def grid_dir() -> Path:
+    return artifacts_dir() / "grid"
+
+
+@contextlib.contextmanager
+def _locked(key: str) -> Iterator[None]:
+    """Hold the exclusive lock of artifact `key` (released by the OS if the process dies)."""
+    lock_dir = grid_dir() / "locks"
+    lock_dir.mkdir(parents=True, exist_ok=True)
+    with open(lock_dir / f"{key}.lock", "w") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def tqc_agent(spec: TQCSpec) -> Path:
+    """The final model zip of TQC+HER run `spec`, trained first if it does not exist yet."""
+    from gcdt.baselines.tqc_her import load_tqc_config, train_tqc
+
+    out = grid_dir() / "tqc" / spec.key()
+    model = out / "model.zip"
+    with _locked(spec.key()):
+        if not (out / "run.json").exists():  # run.json is written last: the run finished
+            for name in ("model.zip", "best_model.zip", "eval.csv"):  # an interrupted run
+                (out / name).unlink(missing_ok=True)
+            cfg = load_tqc_config(spec.config, spec.task)
+            changes = dict(spec.budget)
+            if spec.steps is not None:
+                changes["steps"] = spec.steps
+            cfg = cfg.with_budget(**{k: list(v) if isinstance(v, tuple) else v
+                                     for k, v in changes.items()})  # fmt: skip
+            train_tqc(spec.task, spec.reward, cfg, out, seed=spec.seed, eval_every=spec.eval_every,
+                      eval_episodes=spec.eval_episodes, progress=False)  # fmt: skip
+    return model
+
+
+def dataset(spec: DataSpec) -> Dataset:
+    """Dataset `spec`, made (collected, or drawn from its collections) if it does not exist."""
+    path = grid_dir() / "datasets" / f"{spec.key()}.npz"
+    with _locked(spec.key()):
+        if path.exists():
+            return load_dataset(path)
+        if spec.is_base:
+            made = _collect(spec)
+        else:
+            expert = dataset(spec.base("expert"))
+            if spec.expert_ratio == 1.0:
+                made = subset(expert, spec.size, seed=spec.seed)
+            else:
+                made = mix(expert, dataset(spec.base("random")), spec.expert_ratio, spec.size,
+                           seed=spec.seed)  # fmt: skip
+        made = made.with_metadata(grid_spec=spec.key())
+        made.save(path)
+    return made
+
+
+def _collect(spec: DataSpec) -> Dataset:
+    from gcdt.policies import make_policy
+
+    if spec.expert == "tqc":
+        policy = make_policy(f"tqc:{tqc_agent(spec.expert_tqc)}", spec.task)
+        reward = spec.expert_tqc.reward
+    else:
+        policy, reward = make_policy(spec.expert, spec.task), "sparse"
+    return collect(policy, spec.task, spec.base_size, seed=spec.seed, n_envs=spec.collect_envs,
+                   reward=reward, progress=False)  # fmt: skip
+
+
+def checkpoint_dir(spec: RunSpec) -> Path:
+    """Where an offline run keeps its training checkpoint (resumed after an interruption)."""
+    return grid_dir() / "checkpoints" / spec.key()

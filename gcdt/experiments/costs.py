@@ -1,0 +1,98 @@
+"""Estimated run costs for `gcdt sweep --dry-run`, from measured rates.
+
+Rates come from the result files of finished runs (any profile) where there are some, and
+otherwise from the benchmarks' JSON in results/bench/ or, failing those, from the values
+measured on the reference machine (2 cores, one torch thread per run). They are estimates of
+seconds on this kind of machine; `source` says where each rate came from.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from statistics import median
+
+from gcdt.experiments.grid import RunSpec
+from gcdt.paths import REPO_ROOT
+
+#: Reference-machine rates, used when nothing better was measured here (seconds per unit).
+#: Measured with two runs in parallel, one torch thread each (a local sweep's layout).
+DEFAULT_RATES = {
+    "dt_step": 0.38,  # one DT gradient step, batch 64, K 20
+    "bc_step": 0.005,  # one BC gradient step
+    "dt_eval_step": 1 / 88,  # one env step of evaluation with a DT policy (a forward pass)
+    "eval_step": 1 / 170,  # one env step of evaluation with a BC or TQC policy
+    "collect_step": 1 / 250,  # one collected transition
+    "tqc_step:paper": 1 / 2.2,  # one TQC+HER env step with a gradient step, her-defaults
+    "tqc_step:cpu": 1 / 22,  # the same with the cpu config
+    "run_overhead": 5.0,  # process start, imports, env creation
+}
+#: Mean episode length assumed to turn transitions into the authors' epochs.
+ASSUMED_EPISODE_LENGTH = 30
+PAPER_EPOCHS = 120
+
+
+@dataclass
+class CostModel:
+    rates: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_RATES))
+    source: dict[str, str] = field(default_factory=lambda: dict.fromkeys(DEFAULT_RATES, "default"))
+
+    @classmethod
+    def measured(cls) -> CostModel:
+        """Defaults, overridden by benchmark JSON, overridden by finished runs' timings."""
+        model = cls()
+        bench = REPO_ROOT / "results" / "bench" / "tqc_her_throughput.json"
+        if bench.exists():
+            for name, cell in json.loads(bench.read_text())["configs"].items():
+                model._set(f"tqc_step:{name}", 1 / cell["learning_steps_per_second"], bench.name)
+        samples: dict[str, list[float]] = {}
+        for path in (REPO_ROOT / "results").glob("*/runs/*.json"):
+            try:
+                result = json.loads(path.read_text())
+                if result.get("status") == "done":
+                    _samples(result, samples)
+            except (OSError, ValueError, KeyError, TypeError, ZeroDivisionError):
+                continue  # an unreadable file is the store's business, not the estimate's
+        for name, values in samples.items():
+            model._set(name, median(values), f"median of {len(values)} finished runs")
+        return model
+
+    def _set(self, name: str, value: float, source: str) -> None:
+        self.rates[name], self.source[name] = value, source
+
+    def estimate(self, spec: RunSpec) -> float:
+        """Seconds for `spec` alone (shared datasets and TQC experts are counted apart)."""
+        r = self.rates
+        seconds = r["run_overhead"]
+        is_dt = spec.method in ("gcdt", "dt", "dt-desired")
+        eval_rate = r["dt_eval_step" if is_dt else "eval_step"]
+        seconds += spec.eval_timesteps * len(spec.eval_seeds) * eval_rate
+        if spec.method == "tqc":
+            rate = r.get(f"tqc_step:{spec.tqc.config}", r["tqc_step:paper"])
+            return seconds + (spec.tqc.steps or 0) * rate
+        return seconds + offline_steps(spec) * r["bc_step" if spec.method == "bc" else "dt_step"]
+
+    def collection(self, transitions: int) -> float:
+        return transitions * self.rates["collect_step"]
+
+
+def offline_steps(spec: RunSpec) -> int:
+    """Gradient steps of an offline run (the authors' epochs estimated from the data size)."""
+    if spec.train_steps is not None:
+        return spec.train_steps
+    episodes = math.ceil(spec.data.size / ASSUMED_EPISODE_LENGTH)
+    return PAPER_EPOCHS * math.ceil(episodes / 64)
+
+
+def _samples(result: dict, samples: dict[str, list[float]]) -> None:
+    spec, seconds = result["spec"], result["execution"]["seconds"]
+    steps = result.get("training", {}).get("steps")
+    # Short runs measure start-up more than steps; a reused checkpoint measures nothing.
+    if spec["method"] != "tqc" and steps and steps >= 100 and seconds.get("train_seconds", 0) > 1:
+        name = "bc_step" if spec["method"] == "bc" else "dt_step"
+        samples.setdefault(name, []).append(seconds["train_seconds"] / steps)
+    evaluated = spec["eval_timesteps"] * len(spec["eval_seeds"])
+    if seconds.get("evaluate_seconds") and evaluated >= 1000:
+        name = "dt_eval_step" if spec["method"] in ("gcdt", "dt", "dt-desired") else "eval_step"
+        samples.setdefault(name, []).append(seconds["evaluate_seconds"] / evaluated)

@@ -1,0 +1,218 @@
+"""The experiment grid as data: every run of Table 1, RQ4, RQ5 and the ablations.
+
+A run is a frozen `RunSpec`: method, task, reward, seed, the data it learns from, its training
+and evaluation settings. Its key is a hash of all of that plus `RUN_SCHEMA`, so a run that
+appears in two sections (Table 1's GC-DT is also RQ4's largest subset and RQ5's 100 % point)
+is one run, and a result file can be matched to exactly the config that produced it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import dataclass
+from typing import Any
+
+from gcdt.experiments.profiles import Profile
+
+#: Bump when the meaning of a spec field or of a result file changes: old results re-run.
+RUN_SCHEMA = 1
+SECTIONS = ("table1", "rq4", "rq5", "ablation")
+#: Method name -> (trainer method, goal conditioning); `tqc` is the online baseline.
+OFFLINE_METHODS = {
+    "gcdt": ("dt", "desired+achieved"),
+    "dt": ("dt", "none"),
+    "dt-desired": ("dt", "desired"),
+    "bc": ("bc", "desired+achieved"),
+}
+METHODS = (*OFFLINE_METHODS, "tqc")
+TABLE1_METHODS = ("gcdt", "bc", "tqc")
+ABLATION_METHODS = ("dt", "dt-desired")
+
+
+def content_key(payload: Any) -> str:
+    """A short stable hash of a JSON-serialisable payload (sorted keys)."""
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class TQCSpec:
+    """A TQC+HER training run (the baseline, or the agent that collects expert data)."""
+
+    task: str
+    reward: str
+    config: str  # name in tqc_her.yaml
+    steps: int | None  # None: the config's steps for the task
+    budget: tuple[tuple[str, Any], ...]  # further budget changes, sorted (key, value) pairs
+    seed: int
+    eval_every: int | None  # learning-curve points (they also pick best_model.zip)
+    eval_episodes: int
+
+    def key(self) -> str:
+        return content_key({"tqc": dataclasses.asdict(self), "schema": RUN_SCHEMA})
+
+
+@dataclass(frozen=True)
+class DataSpec:
+    """An offline dataset: expert and random collections of `base_size` transitions, then the
+    whole expert data (`size == base_size`, ratio 1), an expert subset (RQ4) or a mixture (RQ5).
+    """
+
+    task: str
+    size: int
+    expert_ratio: float
+    expert: str  # "scripted" or "tqc"
+    expert_tqc: TQCSpec | None  # the TQC agent when expert == "tqc"
+    base_size: int
+    seed: int
+    collect_envs: int
+
+    def key(self) -> str:
+        return content_key({"data": dataclasses.asdict(self), "schema": RUN_SCHEMA})
+
+    @property
+    def is_base(self) -> bool:
+        """A collection (expert or random), not derived from one."""
+        return (
+            self.size == self.base_size
+            and self.expert_ratio in (0.0, 1.0)
+            and ((self.expert == "random") == (self.expert_ratio == 0.0))
+        )
+
+    def base(self, kind: str) -> DataSpec:
+        """The `"expert"` or `"random"` collection that this data is drawn from."""
+        if kind == "random":
+            return dataclasses.replace(self, size=self.base_size, expert_ratio=0.0,
+                                       expert="random", expert_tqc=None)  # fmt: skip
+        return dataclasses.replace(self, size=self.base_size, expert_ratio=1.0)
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run: train (or, for `tqc`, learn online) and evaluate one agent."""
+
+    method: str  # one of METHODS
+    task: str
+    reward: str
+    seed: int
+    data: DataSpec | None  # None for the online TQC+HER baseline
+    train_steps: int | None  # offline gradient steps; None: the authors' 120 epochs
+    tqc: TQCSpec | None
+    eval_timesteps: int
+    eval_seeds: tuple[int, ...]
+    eval_envs: int
+    threads: int  # torch threads; part of the key since float results may depend on it
+
+    def key(self) -> str:
+        return content_key({"run": self.to_dict(), "schema": RUN_SCHEMA})
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> RunSpec:
+        def tqc(t: dict | None) -> TQCSpec | None:
+            if t is None:
+                return None
+            return TQCSpec(**{**t, "budget": tuple(tuple(kv) for kv in t["budget"])})
+
+        data = d["data"]
+        if data is not None:
+            data = DataSpec(**{**data, "expert_tqc": tqc(data["expert_tqc"])})
+        return cls(**{**d, "data": data, "tqc": tqc(d["tqc"]),
+                      "eval_seeds": tuple(d["eval_seeds"])})  # fmt: skip
+
+    @property
+    def label(self) -> str:
+        """A readable one-line name for listings and progress output."""
+        if self.data is None:
+            where = "online"
+        elif self.data.is_base:
+            where = f"{self.data.size:,} expert"
+        elif self.data.expert_ratio == 1.0:
+            where = f"{self.data.size:,} expert subset"
+        else:
+            where = f"{self.data.size:,} at {self.data.expert_ratio:.0%} expert"
+        return f"{self.method} {self.task}/{self.reward} seed {self.seed} ({where})"
+
+
+@dataclass(frozen=True)
+class GridEntry:
+    """A run and the sections (and the x-value within each) that use it."""
+
+    spec: RunSpec
+    sections: tuple[str, ...]
+
+
+def _budget(profile: Profile) -> tuple[tuple[str, Any], ...]:
+    return tuple(sorted((k, tuple(v) if isinstance(v, list) else v)
+                        for k, v in profile.tqc_budget.items()))  # fmt: skip
+
+
+def expert_tqc_spec(profile: Profile, task: str) -> TQCSpec:
+    """The TQC+HER agent that collects `task`'s expert data: sparse rewards, the config's steps."""
+    return TQCSpec(task, "sparse", profile.tqc_config, None, _budget(profile), profile.data_seed,
+                   profile.tqc_eval_every, profile.tqc_eval_episodes)  # fmt: skip
+
+
+def data_spec(profile: Profile, task: str, size: int, expert_ratio: float) -> DataSpec:
+    expert_tqc = expert_tqc_spec(profile, task) if profile.expert == "tqc" else None
+    return DataSpec(task, int(size), float(expert_ratio), profile.expert, expert_tqc,
+                    profile.dataset_size, profile.data_seed, profile.collect_envs)  # fmt: skip
+
+
+def run_spec(profile: Profile, method: str, task: str, reward: str, seed: int,
+             data: DataSpec | None) -> RunSpec:  # fmt: skip
+    tqc = None
+    if method == "tqc":
+        steps = profile.tqc_steps if profile.tqc_steps is not None else profile.dataset_size
+        tqc = TQCSpec(task, reward, profile.tqc_config, steps, _budget(profile), seed,
+                      profile.tqc_eval_every, profile.tqc_eval_episodes)  # fmt: skip
+    train_steps = None if method == "tqc" or profile.train_steps is None else (
+        profile.train_steps[task])  # fmt: skip
+    eval_seeds = tuple(seed + 100 * i for i in range(profile.eval_seeds))
+    return RunSpec(method, task, reward, seed, data, train_steps, tqc, profile.eval_timesteps,
+                   eval_seeds, profile.eval_envs, profile.cpus_per_run)  # fmt: skip
+
+
+def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
+    """Every run of `profile` (of one section with `only`), each once, in a stable order."""
+    if only is not None and only not in SECTIONS:
+        from gcdt.errors import GcdtError
+
+        raise GcdtError(f"unknown grid section {only!r}: expected one of {', '.join(SECTIONS)}")
+    entries: dict[str, tuple[RunSpec, list[str]]] = {}
+
+    def add(section: str, spec: RunSpec) -> None:
+        entries.setdefault(spec.key(), (spec, []))[1].append(section)
+
+    p = profile
+    for section in SECTIONS if only is None else (only,):
+        scope = getattr(p, section)
+        for task in scope.tasks:
+            full = data_spec(p, task, p.dataset_size, 1.0)
+            for reward in scope.rewards:
+                for seed in p.seeds:
+                    if section == "table1":
+                        for method in TABLE1_METHODS:
+                            tqc_scope = p.table1_tqc
+                            if method == "tqc" and not (
+                                task in tqc_scope.tasks and reward in tqc_scope.rewards
+                            ):
+                                continue
+                            data = None if method == "tqc" else full
+                            add(section, run_spec(p, method, task, reward, seed, data))
+                    elif section == "ablation":
+                        for method in ABLATION_METHODS:
+                            add(section, run_spec(p, method, task, reward, seed, full))
+                    elif section == "rq4":
+                        for size in p.rq4_sizes:
+                            data = data_spec(p, task, size, 1.0)
+                            add(section, run_spec(p, "gcdt", task, reward, seed, data))
+                    else:  # rq5
+                        for ratio in p.rq5_ratios:
+                            data = data_spec(p, task, p.dataset_size, ratio)
+                            add(section, run_spec(p, "gcdt", task, reward, seed, data))
+    return [GridEntry(spec, tuple(sections)) for spec, sections in entries.values()]

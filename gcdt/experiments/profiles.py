@@ -1,0 +1,199 @@
+"""Scale profiles: every number that sets the size of the experiment grid, in one place.
+
+`paper` is the paper's protocol; `quick` a real, reduced reproduction for a 2-core CPU
+(about 90 minutes); `smoke` runs every stage in minutes and its numbers mean nothing.
+`deviations(profile)` is the one text that lists how a profile differs from the paper; the
+README and the reports print it rather than restating it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from gcdt.envs import REWARDS
+from gcdt.errors import GcdtError
+
+PAPER_TASKS = ("reach", "push", "pick_and_place")
+ALL_REWARDS = tuple(REWARDS)
+
+
+@dataclass(frozen=True)
+class Scope:
+    """Which tasks and rewards a section of the grid covers."""
+
+    tasks: tuple[str, ...] = PAPER_TASKS
+    rewards: tuple[str, ...] = ALL_REWARDS
+
+
+@dataclass(frozen=True)
+class Profile:
+    """One size of the grid (DESIGN.md section 4). Defaults are the paper's protocol."""
+
+    name: str
+    description: str
+    seeds: tuple[int, ...] = (0, 1, 2)  # training seeds per grid cell ("3 random seeds")
+    # Data: the expert that collects expert trajectories ("tqc": converged TQC+HER agents, as
+    # in the paper; "scripted": the state-machine experts of gcdt.policies.scripted).
+    expert: str = "tqc"
+    dataset_size: int = 1_000_000  # transitions of the full expert data (Table 1, RQ5)
+    data_seed: int = 0  # seed of every collection, subset and mixture
+    collect_envs: int = 1  # env processes per collection
+    rq4_sizes: tuple[int, ...] = (100_000, 250_000, 500_000, 750_000, 1_000_000)
+    rq5_ratios: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
+    # Offline training (GC-DT, DT ablations, BC): gradient steps per task, or None for the
+    # authors' 120 epochs of ceil(#episodes / 64) steps.
+    train_steps: dict[str, int] | None = None
+    # Evaluation of every trained agent: env steps per evaluation seed (the paper's 10,000).
+    eval_timesteps: int = 10_000
+    eval_seeds: int = 1  # evaluations per run, seeded run_seed, run_seed + 100, ...
+    eval_envs: int = 1
+    # TQC+HER: the tqc_her.yaml config, online steps of the Table-1 baseline (None: as many as
+    # the offline data has transitions, "an equivalent number of online steps"), and the
+    # budget changes applied to both the baseline and the expert.
+    tqc_config: str = "paper"
+    tqc_steps: int | None = None
+    tqc_budget: dict[str, Any] = field(default_factory=dict)
+    tqc_eval_every: int | None = None  # env steps between learning-curve points (None: 10/run)
+    tqc_eval_episodes: int = 20
+    # Which tasks and rewards each section covers (table1_tqc: Table 1's TQC+HER cells).
+    table1: Scope = Scope()
+    table1_tqc: Scope = Scope()
+    rq4: Scope = Scope()
+    rq5: Scope = Scope()
+    ablation: Scope = Scope()
+    # Resources of one run: CPU threads, and the GPU share under Ray (4 runs per GPU).
+    cpus_per_run: int = 1
+    gpus_per_run: float = 0.25
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+PAPER = Profile(
+    name="paper",
+    description="the paper's protocol: 3 seeds, 1M-transition TQC expert data, 120 epochs, "
+    "10,000-step evaluation, the full RQ4/RQ5 grids; GPU or Ray-cluster work",
+)
+
+QUICK = dataclasses.replace(
+    PAPER,
+    name="quick",
+    description="a real, reduced reproduction on a 2-core CPU in about 90 minutes",
+    seeds=(0,),
+    expert="scripted",
+    dataset_size=20_000,
+    rq4_sizes=(2_500, 5_000, 10_000, 20_000),
+    rq5_ratios=(0.0, 0.25, 0.5, 0.75, 1.0),
+    train_steps={"reach": 400, "push": 1000, "pick_and_place": 1500},
+    eval_timesteps=2_000,
+    eval_envs=1,
+    tqc_config="cpu",
+    tqc_steps=5_000,
+    table1=Scope(),
+    # TQC+HER needs ~1M online steps on Push and PickAndPlace: days on 2 cores at its CPU
+    # speed (results/bench/tqc_her_throughput.json). Reach converges within 5,000.
+    table1_tqc=Scope(tasks=("reach",)),
+    rq4=Scope(tasks=("push",), rewards=("sparse",)),
+    rq5=Scope(tasks=("push",), rewards=("sparse",)),
+    ablation=Scope(tasks=("reach", "push"), rewards=("sparse",)),
+)
+
+SMOKE = dataclasses.replace(
+    QUICK,
+    name="smoke",
+    description="every stage and every table and figure file in minutes, for CI; its numbers "
+    "mean nothing",
+    dataset_size=1_000,
+    rq4_sizes=(500, 1_000),
+    rq5_ratios=(0.0, 0.5, 1.0),
+    train_steps={"reach": 10, "push": 10, "pick_and_place": 10},
+    eval_timesteps=100,
+    tqc_steps=200,
+    tqc_budget={"learning_starts": 100, "batch_size": 64, "net_arch": [32, 32]},
+    tqc_eval_every=200,
+    tqc_eval_episodes=2,
+    table1_tqc=Scope(),  # cheap at this size: every stage runs on every task
+    ablation=Scope(rewards=("sparse",)),
+)
+
+PROFILES: dict[str, Profile] = {p.name: p for p in (SMOKE, QUICK, PAPER)}
+
+
+def get_profile(name: str) -> Profile:
+    if name not in PROFILES:
+        raise GcdtError(f"unknown profile {name!r}: expected one of {', '.join(PROFILES)}")
+    return PROFILES[name]
+
+
+def _scope_text(scope: Scope) -> str:
+    return f"{', '.join(scope.tasks)} × {', '.join(scope.rewards)}"
+
+
+def deviations(profile: Profile) -> list[str]:
+    """How `profile` differs from the paper's protocol, one plain sentence per difference."""
+    paper, p, out = PAPER, profile, []
+    if p.seeds != paper.seeds:
+        seeds = f"{len(p.seeds)} seed" + ("s" if len(p.seeds) > 1 else "")
+        out.append(f"{seeds} per cell instead of {len(paper.seeds)}")
+    if p.expert != paper.expert:
+        out.append(
+            f"expert data from the {p.expert} experts (gcdt.policies.scripted) instead of "
+            "converged TQC+HER agents"
+        )
+    if p.dataset_size != paper.dataset_size:
+        out.append(
+            f"{p.dataset_size:,} transitions of expert (and of random) data instead of "
+            f"{paper.dataset_size:,}"
+        )
+    if p.rq4_sizes != paper.rq4_sizes:
+        out.append(
+            "RQ4 subset sizes "
+            + ", ".join(f"{s:,}" for s in p.rq4_sizes)
+            + " instead of "
+            + ", ".join(f"{s:,}" for s in paper.rq4_sizes)
+        )
+    if p.rq5_ratios != paper.rq5_ratios:
+        out.append(
+            "RQ5 expert ratios "
+            + ", ".join(f"{r:.0%}" for r in p.rq5_ratios)
+            + " instead of "
+            + ", ".join(f"{r:.0%}" for r in paper.rq5_ratios)
+        )
+    if p.train_steps != paper.train_steps:
+        steps = ", ".join(f"{t} {n:,}" for t, n in (p.train_steps or {}).items())
+        out.append(
+            f"offline training for a fixed number of gradient steps ({steps}) instead of 120 epochs"
+        )
+    if p.eval_timesteps != paper.eval_timesteps:
+        out.append(
+            f"evaluation over {p.eval_timesteps:,} env steps instead of {paper.eval_timesteps:,}"
+        )
+    if p.tqc_config != paper.tqc_config or p.tqc_budget:
+        changes = {"config": p.tqc_config, **p.tqc_budget}
+        out.append(
+            "TQC+HER with changed budget values ("
+            + ", ".join(f"{k} {v}" for k, v in changes.items())
+            + ") instead of rl-baselines3-zoo's her-defaults"
+        )
+    if p.tqc_steps != paper.tqc_steps:
+        out.append(
+            f"TQC+HER baseline trained for {p.tqc_steps:,} online steps instead of as many "
+            "as the offline data has transitions"
+        )
+    for section in ("table1", "table1_tqc", "rq4", "rq5", "ablation"):
+        scope = getattr(p, section)
+        if scope != getattr(paper, section):
+            name = "Table 1's TQC+HER" if section == "table1_tqc" else section
+            out.append(f"{name} covers {_scope_text(scope)} only")
+    return out
+
+
+def deviations_text(profile: Profile) -> str:
+    """`deviations` as a Markdown list (or a line saying there are none)."""
+    items = deviations(profile)
+    if not items:
+        return f"The `{profile.name}` profile follows the paper's protocol."
+    head = f"The `{profile.name}` profile ({profile.description}) deviates from the paper:"
+    return "\n".join([head, "", *(f"- {item}." for item in items)])

@@ -1,0 +1,131 @@
+"""One run of the grid, start to finish: data, training, evaluation, result file.
+
+`execute_run` is what every backend calls (a local worker process or a Ray task). It never
+raises for a failing run: the error and traceback go into the run's result file, marked
+`failed`, and the next sweep retries it. The result holds only what the run's config
+determines (spec, metrics, evaluations) apart from the `execution` block (timings, host,
+backend, versions), so two backends produce the same files apart from that block.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+import traceback
+from typing import Any
+
+import numpy as np
+
+from gcdt.experiments import artifacts
+from gcdt.experiments.grid import OFFLINE_METHODS, RUN_SCHEMA, RunSpec
+from gcdt.experiments.store import RunStore
+from gcdt.paths import ARTIFACTS_ENV
+from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_now
+
+
+def execute_run(spec_dict: dict[str, Any], store_root: str, artifacts_root: str,
+                backend: str) -> str:  # fmt: skip
+    """Run `spec_dict` (a `RunSpec.to_dict()`), write its result; return "done" or "failed".
+
+    `artifacts_root` is the driver's artifacts folder: workers share it, whatever their
+    environment says.
+    """
+    import torch
+
+    os.environ[ARTIFACTS_ENV] = artifacts_root
+    spec = RunSpec.from_dict(spec_dict)
+    key = spec.key()
+    torch.set_num_threads(spec.threads)
+    started, clock = utc_now(), time.perf_counter()
+    timings: dict[str, float] = {}
+    result: dict[str, Any] = {"key": key, "schema": RUN_SCHEMA, "spec": spec.to_dict()}
+    try:
+        policy, trained = _trained_policy(spec, timings)
+        result["training"] = trained
+        began = time.perf_counter()
+        result["evaluations"] = [_evaluate(policy, spec, seed) for seed in spec.eval_seeds]
+        timings["evaluate_seconds"] = round(time.perf_counter() - began, 3)
+        result["metrics"] = _metrics(result["evaluations"])
+        result["status"] = "done"
+    except Exception as err:  # recorded, retried by the next sweep; never stops the others
+        result["status"] = "failed"
+        result["error"] = f"{type(err).__name__}: {err}".splitlines()[0]
+        result["traceback"] = traceback.format_exc()
+    timings["total_seconds"] = round(time.perf_counter() - clock, 3)
+    result["execution"] = {
+        "backend": backend,
+        "host": platform.node(),
+        "started": started,
+        "finished": utc_now(),
+        "seconds": timings,
+        "torch_threads": torch.get_num_threads(),
+        "git_commit": git_commit(),
+        "versions": package_versions((*TRACKED_PACKAGES, "stable-baselines3", "sb3-contrib")),
+    }
+    RunStore(store_root).write(key, result)
+    return result["status"]
+
+
+def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict[str, Any]]:
+    """The run's agent as a policy (made if needed), and what its training recorded."""
+    began = time.perf_counter()
+    if spec.method == "tqc":
+        from gcdt.policies.tqc import TQCPolicy
+
+        model = artifacts.tqc_agent(spec.tqc)
+        timings["train_seconds"] = round(time.perf_counter() - began, 3)
+        run = json.loads((model.parent / "run.json").read_text())
+        curve_point = ("env_steps", "success_rate", "mean_return", "episodes")  # no timings
+        trained = {
+            "env_steps": run["env_steps"],
+            "overrides": run["overrides"],
+            **{k: {f: run[k][f] for f in curve_point} for k in ("best", "final")},
+        }
+        return TQCPolicy(model, spec.task), trained
+
+    from gcdt.policies.trained import TrainedPolicy
+    from gcdt.training import TrainConfig, load_checkpoint, train
+
+    data = artifacts.dataset(spec.data)
+    timings["data_seconds"] = round(time.perf_counter() - began, 3)
+    method, conditioning = OFFLINE_METHODS[spec.method]
+    cfg = TrainConfig(method=method, goal_conditioning=conditioning, reward=spec.reward,
+                      steps=spec.train_steps, seed=spec.seed)  # fmt: skip
+    out = artifacts.checkpoint_dir(spec)
+    ckpt_path = out / "checkpoint.pt"
+    began = time.perf_counter()
+    ckpt = load_checkpoint(ckpt_path) if ckpt_path.exists() else None
+    if ckpt is None or not ckpt["complete"]:  # fresh, or resumed after an interruption
+        train(data, cfg, out, resume=ckpt is not None, progress=False)
+        ckpt = load_checkpoint(ckpt_path)
+    timings["train_seconds"] = round(time.perf_counter() - began, 3)
+    history = ckpt["history"]
+    trained = {
+        "steps": ckpt["step"],
+        "final_loss": history[-1]["loss"] if history else None,
+        "dataset": {k: data.summary()[k] for k in ("transitions", "episodes", "success_rate")},
+    }
+    return TrainedPolicy(ckpt, spec.task), trained
+
+
+def _evaluate(policy: Any, spec: RunSpec, seed: int) -> dict[str, Any]:
+    from gcdt.evaluation import evaluate
+
+    summary = evaluate(policy, spec.task, spec.reward, timesteps=spec.eval_timesteps,
+                       n_envs=spec.eval_envs, seed=seed, progress=False).summary  # fmt: skip
+    keep = ("seed", "episodes", "success_rate", "mean_return", "std_return", "mean_length",
+            "mean_final_distance")  # fmt: skip
+    return {k: summary[k] for k in keep}
+
+
+def _metrics(evaluations: list[dict[str, Any]]) -> dict[str, Any]:
+    """Success rate and return averaged over the evaluation seeds (None if nothing finished)."""
+    rates = [e["success_rate"] for e in evaluations if e["success_rate"] is not None]
+    returns = [e["mean_return"] for e in evaluations if e["mean_return"] is not None]
+    return {
+        "success_rate": float(np.mean(rates)) if rates else None,
+        "mean_return": float(np.mean(returns)) if returns else None,
+        "episodes": int(sum(e["episodes"] for e in evaluations)),
+    }

@@ -1,0 +1,216 @@
+"""The experiment grid: profiles, run keys, the run store, and sweeps on local and Ray backends."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from gcdt.errors import GcdtError
+from gcdt.experiments import (
+    PROFILES,
+    RunSpec,
+    RunStore,
+    build_grid,
+    deviations,
+    deviations_text,
+    get_profile,
+    sweep,
+)
+from gcdt.experiments.grid import RUN_SCHEMA
+from gcdt.experiments.profiles import SMOKE, Scope
+
+ONE = Scope(tasks=("reach",), rewards=("sparse",))
+#: Seven real runs on Reach in well under a minute: Table 1 (GC-DT, BC, TQC+HER), one RQ4
+#: subset, one RQ5 mixture, the two DT ablations.
+TINY = dataclasses.replace(
+    SMOKE,
+    name="tiny",
+    dataset_size=300,
+    rq4_sizes=(150, 300),
+    rq5_ratios=(0.5, 1.0),
+    train_steps={"reach": 5},
+    eval_timesteps=60,
+    tqc_steps=120,
+    tqc_budget={"learning_starts": 50, "batch_size": 16, "net_arch": [16]},
+    tqc_eval_every=120,
+    tqc_eval_episodes=1,
+    table1=ONE,
+    rq4=ONE,
+    rq5=ONE,
+    ablation=ONE,
+)
+
+
+def test_paper_profile_is_the_paper_and_others_list_their_deviations():
+    assert deviations(PROFILES["paper"]) == []
+    quick = deviations_text(get_profile("quick"))
+    assert "1 seed per cell instead of 3" in quick
+    assert "scripted experts" in quick and "instead of 10,000" in quick
+    with pytest.raises(GcdtError, match="unknown profile 'huge'"):
+        get_profile("huge")
+
+
+def test_paper_grid_shares_runs_between_sections():
+    grid = build_grid(PROFILES["paper"])
+    keys = [e.spec.key() for e in grid]
+    assert len(keys) == len(set(keys)) == 234
+    # Table 1's GC-DT on the full data is also RQ4's largest subset and RQ5's 100 % point.
+    full = [e for e in grid if e.spec.method == "gcdt" and "table1" in e.sections]
+    assert len(full) == 18 and all(e.sections == ("table1", "rq4", "rq5") for e in full)
+    assert {e.spec.method for e in grid} == {"gcdt", "bc", "tqc", "dt", "dt-desired"}
+    tqc = next(e.spec for e in grid if e.spec.method == "tqc")
+    assert tqc.tqc.steps == 1_000_000 and tqc.data is None  # "equivalent online steps"
+    with pytest.raises(GcdtError, match="unknown grid section 'rq9'"):
+        build_grid(PROFILES["paper"], only="rq9")
+
+
+def test_run_key_is_stable_and_complete():
+    spec = build_grid(TINY, only="table1")[0].spec
+    assert RunSpec.from_dict(json.loads(json.dumps(spec.to_dict()))).key() == spec.key()
+    assert dataclasses.replace(spec, seed=1).key() != spec.key()
+    assert dataclasses.replace(spec, eval_timesteps=61).key() != spec.key()
+
+
+def _results(root: Path) -> dict[str, dict]:
+    """Result files without their execution block (timings, host, backend)."""
+    out = {}
+    for path in sorted(root.glob("*.json")):
+        result = json.loads(path.read_text())
+        result.pop("execution")
+        out[path.name] = result
+    return out
+
+
+@pytest.fixture(scope="module")
+def local_sweep(tmp_path_factory):
+    root = tmp_path_factory.mktemp("local")
+    os.environ["GCDT_ARTIFACTS"] = str(root / "artifacts")
+    try:
+        summary = sweep(TINY, store_root=root / "runs", workers=2, progress=False)
+    finally:
+        del os.environ["GCDT_ARTIFACTS"]
+    return root, summary
+
+
+def test_local_sweep_runs_every_run_once(local_sweep):
+    root, summary = local_sweep
+    assert summary.ok and len(summary.done) == 7 and not summary.skipped
+    results = _results(root / "runs")
+    assert len(results) == 7 and all(r["status"] == "done" for r in results.values())
+    methods = sorted(r["spec"]["method"] for r in results.values())
+    assert methods == ["bc", "dt", "dt-desired", "gcdt", "gcdt", "gcdt", "tqc"]
+    for r in results.values():
+        assert r["schema"] == RUN_SCHEMA and r["evaluations"][0]["episodes"] >= 1
+        assert 0.0 <= r["metrics"]["success_rate"] <= 1.0
+    # One expert and one random collection, two derived datasets, all content-keyed.
+    datasets = list((root / "artifacts" / "grid" / "datasets").glob("*.npz"))
+    assert len(datasets) == 4
+    again = sweep(TINY, store_root=root / "runs", workers=2, progress=False)
+    assert len(again.skipped) == 7 and not again.done and not again.failed
+
+
+def test_ray_backend_writes_the_same_results(local_sweep, tmp_path, monkeypatch):
+    pytest.importorskip("ray")
+    monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))  # trains from scratch
+    summary = sweep(TINY, backend="ray", store_root=tmp_path / "runs", workers=2,
+                    progress=False)  # fmt: skip
+    assert summary.ok and len(summary.done) == 7
+    assert _results(tmp_path / "runs") == _results(local_sweep[0] / "runs")
+    backends = {json.loads(p.read_text())["execution"]["backend"]
+                for p in (tmp_path / "runs").glob("*.json")}  # fmt: skip
+    assert backends == {"ray"}
+
+
+def test_corrupt_and_foreign_results_are_reported_and_rerun(local_sweep, tmp_path, monkeypatch):
+    root, _ = local_sweep
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    for path in (root / "runs").glob("*.json"):
+        runs.joinpath(path.name).write_bytes(path.read_bytes())
+    victim = sorted(runs.glob("*.json"))[0]
+    victim.write_text('{"key": "trunc')
+    (runs / "0123456789abcdef.json").write_text("{}")
+    monkeypatch.setenv("GCDT_ARTIFACTS", str(root / "artifacts"))
+    summary = sweep(TINY, store_root=runs, workers=1, progress=False)
+    assert summary.done == [victim.stem] and len(summary.skipped) == 6
+    assert any("is not valid JSON" in w for w in summary.warnings)
+    assert any("0123456789abcdef.json is not a result of this grid" in w for w in summary.warnings)
+    assert RunStore(runs).read(victim.stem).state == "done"
+
+
+def test_failing_run_is_recorded_and_the_others_complete(local_sweep, tmp_path, monkeypatch):
+    monkeypatch.setenv("GCDT_ARTIFACTS", str(local_sweep[0] / "artifacts"))
+    broken = dataclasses.replace(TINY, tqc_budget={**TINY.tqc_budget, "gamma": 0.5})
+    summary = sweep(broken, store_root=tmp_path, workers=2, progress=False)
+    assert not summary.ok and len(summary.failed) == 1 and len(summary.done) == 6
+    failed = json.loads((tmp_path / f"{summary.failed[0]}.json").read_text())
+    assert failed["status"] == "failed" and failed["spec"]["method"] == "tqc"
+    assert "gamma is not a budget value" in failed["error"]
+    assert "Traceback" in failed["traceback"]
+    retry = sweep(broken, store_root=tmp_path, workers=2, progress=False)
+    assert retry.failed == summary.failed and len(retry.skipped) == 6  # failed runs re-run
+
+
+DRIVER = """
+import sys
+from tests.test_experiments import TINY
+from gcdt.experiments import sweep
+summary = sweep(TINY, store_root=sys.argv[1], workers=2, progress=False)
+print(summary.line())
+"""
+
+
+def test_killed_sweep_resumes_with_only_the_missing_runs(tmp_path):
+    runs = tmp_path / "runs"
+    env = {**os.environ, "GCDT_ARTIFACTS": str(tmp_path / "artifacts")}
+    repo = Path(__file__).resolve().parent.parent
+    driver = subprocess.Popen([sys.executable, "-c", DRIVER, str(runs)], cwd=repo, env=env,
+                              start_new_session=True)  # fmt: skip
+    deadline = time.monotonic() + 300
+    while not list(runs.glob("*.json")) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    os.killpg(driver.pid, signal.SIGKILL)  # the driver and its workers, mid-sweep
+    driver.wait()
+    first = {p.name: p.stat().st_mtime_ns for p in runs.glob("*.json")}
+    assert 1 <= len(first) < 7
+    for name in first:  # whatever was written is whole
+        assert RunStore(runs).read(Path(name).stem).state == "done"
+    done = subprocess.run([sys.executable, "-c", DRIVER, str(runs)], cwd=repo, env=env,
+                          capture_output=True, text=True, timeout=600)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert f"{7 - len(first)} done, {len(first)} skipped, 0 failed" in done.stdout
+    assert {p.name: p.stat().st_mtime_ns for p in runs.glob("*.json") if p.name in first} == first
+    assert not [p for p in runs.iterdir() if p.suffix != ".json"]  # no temp files left
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--profile", "huge"], "argument --profile: invalid choice: 'huge'"),
+        (["--profile", "smoke", "--backend", "slurm"], "invalid choice: 'slurm'"),
+        (["--profile", "smoke", "--only", "rq9"], "invalid choice: 'rq9'"),
+        (["--profile", "smoke", "--address", "1.2.3.4:6379"], "--address applies only to"),
+        (["--profile", "smoke", "--backend", "ray", "--address", "nonsense"],
+         "Ray address 'nonsense' is not HOST:PORT"),
+    ],
+)  # fmt: skip
+def test_bad_sweep_input_exit_2(assert_usage_error, argv, message):
+    assert_usage_error(["sweep", *argv], message)
+
+
+def test_unreachable_ray_address_fails_within_seconds(assert_usage_error):
+    pytest.importorskip("ray")
+    started = time.monotonic()
+    assert_usage_error(
+        ["sweep", "--profile", "smoke", "--backend", "ray", "--address", "127.0.0.1:9"],
+        "cannot reach the Ray cluster at 127.0.0.1:9",
+    )
+    assert time.monotonic() - started < 30

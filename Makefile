@@ -42,6 +42,7 @@ bench: install
 	$(PY) benchmarks/dataset_io.py --task push
 	$(PY) benchmarks/training_throughput.py
 	$(PY) benchmarks/tqc_her.py throughput
+	$(PY) benchmarks/run_costs.py
 	$(PY) benchmarks/summary.py --readme
 
 # TQC+HER trained on Reach (sparse and dense) to >= 95 % success: ~20 minutes on 2 cores.

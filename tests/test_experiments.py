@@ -214,3 +214,19 @@ def test_unreachable_ray_address_fails_within_seconds(assert_usage_error):
         "cannot reach the Ray cluster at 127.0.0.1:9",
     )
     assert time.monotonic() - started < 30
+
+
+def test_dry_run_lists_runs_with_state_and_cost(capsys):
+    from gcdt.cli import main
+    from gcdt.experiments.costs import CostModel
+
+    assert main(["sweep", "--profile", "quick", "--dry-run", "--only", "rq4"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 5 and lines[-1].startswith("4 runs, ")
+    assert all("gcdt push/sparse seed 0" in line and " min " in line for line in lines[:-1])
+    costs = CostModel()
+    short, long = (dataclasses.replace(build_grid(TINY, only="table1")[0].spec, train_steps=n)
+                   for n in (10, 1000))  # fmt: skip
+    assert costs.estimate(long) - costs.estimate(short) == pytest.approx(
+        990 * costs.rates["dt_step"]
+    )

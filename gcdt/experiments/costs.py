@@ -16,8 +16,9 @@ from statistics import median
 from gcdt.experiments.grid import RunSpec
 from gcdt.paths import REPO_ROOT
 
-#: Reference-machine rates, used when nothing better was measured here (seconds per unit).
-#: Measured with two runs in parallel, one torch thread each (a local sweep's layout).
+#: Reference-machine rates (seconds per unit), used when neither results/bench/ nor finished
+#: runs say better: `benchmarks/run_costs.py` (two runs in parallel, one torch thread each,
+#: a local sweep's layout) and `benchmarks/tqc_her.py throughput`.
 DEFAULT_RATES = {
     "dt_step": 0.38,  # one DT gradient step, batch 64, K 20
     "bc_step": 0.005,  # one BC gradient step
@@ -42,10 +43,21 @@ class CostModel:
     def measured(cls) -> CostModel:
         """Defaults, overridden by benchmark JSON, overridden by finished runs' timings."""
         model = cls()
-        bench = REPO_ROOT / "results" / "bench" / "tqc_her_throughput.json"
-        if bench.exists():
-            for name, cell in json.loads(bench.read_text())["configs"].items():
-                model._set(f"tqc_step:{name}", 1 / cell["learning_steps_per_second"], bench.name)
+        bench = REPO_ROOT / "results" / "bench"
+        if (bench / "tqc_her_throughput.json").exists():
+            tqc = json.loads((bench / "tqc_her_throughput.json").read_text())
+            for name, cell in tqc["configs"].items():
+                model._set(f"tqc_step:{name}", 1 / cell["learning_steps_per_second"],
+                           "tqc_her_throughput.json")  # fmt: skip
+        if (bench / "run_costs.json").exists():
+            runs = json.loads((bench / "run_costs.json").read_text())["results"]
+            for name, key, invert in (
+                ("dt_step", "dt_seconds_per_step", False),
+                ("bc_step", "bc_seconds_per_step", False),
+                ("dt_eval_step", "dt_eval_steps_per_second", True),
+                ("eval_step", "bc_eval_steps_per_second", True),
+            ):
+                model._set(name, 1 / runs[key] if invert else runs[key], "run_costs.json")
         samples: dict[str, list[float]] = {}
         for path in (REPO_ROOT / "results").glob("*/runs/*.json"):
             try:

@@ -147,20 +147,12 @@ def deviations(profile: Profile) -> list[str]:
             f"{p.dataset_size:,} transitions of expert (and of random) data instead of "
             f"{paper.dataset_size:,}"
         )
-    if p.rq4_sizes != paper.rq4_sizes:
-        out.append(
-            "RQ4 subset sizes "
-            + ", ".join(f"{s:,}" for s in p.rq4_sizes)
-            + " instead of "
-            + ", ".join(f"{s:,}" for s in paper.rq4_sizes)
-        )
-    if p.rq5_ratios != paper.rq5_ratios:
-        out.append(
-            "RQ5 expert ratios "
-            + ", ".join(f"{r:.0%}" for r in p.rq5_ratios)
-            + " instead of "
-            + ", ".join(f"{r:.0%}" for r in paper.rq5_ratios)
-        )
+    for name, label, fmt in (("rq4_sizes", "RQ4 subset sizes", "{:,}"),
+                             ("rq5_ratios", "RQ5 expert ratios", "{:.0%}")):  # fmt: skip
+        ours, theirs = getattr(p, name), getattr(paper, name)
+        if ours != theirs:
+            listed = [", ".join(fmt.format(v) for v in values) for values in (ours, theirs)]
+            out.append(f"{label} {listed[0]} instead of {listed[1]}")
     if p.train_steps != paper.train_steps:
         steps = ", ".join(f"{t} {n:,}" for t, n in (p.train_steps or {}).items())
         out.append(

@@ -5,8 +5,11 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.gcdt-installed
 PYTEST_ARGS ?=
+PROFILE ?= quick
+BACKEND ?= local
+NOTEBOOKS := $(sort $(wildcard notebooks/[0-9]*.ipynb))
 
-.PHONY: install test lint bench bench-tqc reproduce clean help
+.PHONY: install test lint bench bench-tqc reproduce figures lab clean help
 
 help:
 	@echo "make install    create $(VENV) from environment/ (no-op when up to date)"
@@ -14,7 +17,10 @@ help:
 	@echo "make lint       ruff over gcdt/, tests/ and benchmarks/"
 	@echo "make bench      throughput benchmarks -> results/bench/*.json"
 	@echo "make bench-tqc  TQC+HER trained on Reach to success -> results/bench/tqc_her_reach.json"
-	@echo "make reproduce  regenerate the paper's tables and figures"
+	@echo "make reproduce  [PROFILE=smoke|quick|paper] [BACKEND=local|ray]: the notebooks in order,"
+	@echo "                then every table (results/PROFILE/) and figure (figures/PROFILE/)"
+	@echo "make figures    [PROFILE=...] re-render tables and figures from results/PROFILE/runs/"
+	@echo "make lab        JupyterLab with the project's kernel"
 	@echo "make clean      remove caches (keeps $(VENV) and artifacts/)"
 
 install: $(STAMP)
@@ -50,10 +56,25 @@ bench-tqc: install
 	$(PY) benchmarks/tqc_her.py reach
 	$(PY) benchmarks/summary.py --readme
 
+# The notebooks in order, executed by papermill into build/ (git-ignored); tables and
+# figures land in results/$(PROFILE)/ and figures/$(PROFILE)/.
 reproduce: install
-	@echo "make reproduce: the notebook pipeline (datasets, training, Table 1, Fig. 3-4) is not built yet;" >&2
-	@echo "see README 'Status'. Available now: $(VENV)/bin/gcdt evaluate --help" >&2
-	@exit 2
+	@$(VENV)/bin/gcdt sweep --profile $(PROFILE) --backend $(BACKEND) --dry-run > /dev/null
+	@mkdir -p build/notebooks/$(PROFILE)
+	@for nb in $(NOTEBOOKS); do \
+	  echo "== $$nb ($(PROFILE), $(BACKEND))"; \
+	  $(PY) -m papermill --cwd notebooks --log-level WARNING -p profile $(PROFILE) \
+	    -p backend $(BACKEND) $$nb build/notebooks/$(PROFILE)/$$(basename $$nb) || exit 1; \
+	done
+	$(VENV)/bin/gcdt report --profile $(PROFILE)
+
+# Re-render the tables and figures from results/$(PROFILE)/runs/ alone.
+figures: install
+	$(VENV)/bin/gcdt report --profile $(PROFILE)
+
+lab: install
+	$(PY) -m ipykernel install --user --name gcdt --display-name "gcdt (.venv)"
+	$(VENV)/bin/jupyter lab notebooks/
 
 clean:
 	rm -rf .pytest_cache .ruff_cache build *.egg-info

@@ -244,6 +244,16 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     sw.set_defaults(run=_sweep)
+
+    rp = sub.add_parser(
+        "report",
+        help="tables and figures of the paper from results/PROFILE/runs/",
+        description="Write Table 1 and the ablation table (CSV, Markdown, LaTeX) and Fig. 3 "
+        "and 4 (PNG, PDF) from a profile's finished runs.",
+    )
+    rp.add_argument("--profile", required=True, choices=list(PROFILES))
+    rp.add_argument("--readme", action="store_true", help="also update README.md's results")
+    rp.set_defaults(run=_report_cmd)
     return parser
 
 
@@ -473,6 +483,20 @@ def _sweep(args: argparse.Namespace) -> int:
         print(f"warning: {warning}", file=sys.stderr)
     print(summary.line())
     return 0 if summary.ok else 1
+
+
+def _report_cmd(args: argparse.Namespace) -> int:
+    from gcdt.experiments import get_profile
+    from gcdt.paths import REPO_ROOT
+    from gcdt.report import update_readme, write_report
+
+    profile = get_profile(args.profile)
+    for path in write_report(profile):
+        print(path.relative_to(REPO_ROOT) if path.is_relative_to(REPO_ROOT) else path)
+    if args.readme:
+        update_readme(profile, REPO_ROOT / "README.md")
+        print("README.md")
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:

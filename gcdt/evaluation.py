@@ -193,11 +193,13 @@ def record_rollout(
     path: str | Path | None = None,
     size: int = 360,
     fps: int = 12,
+    goal: np.ndarray | None = None,
 ) -> list[np.ndarray]:
     """Render one episode headless (`rgb_array`) and, with `path`, save it as an animated GIF.
 
     The episode is the run's episode 0 for `seed`, the same one `evaluate(seed=seed)` starts
-    with. Returns the frames, `[size, size, 3]` uint8 each.
+    with; `goal` replaces its desired goal (and moves the target marker). Returns the frames,
+    `[size, size, 3]` uint8 each.
     """
     from PIL import Image
 
@@ -208,6 +210,8 @@ def record_rollout(
     try:
         policy.reset(1, seed)
         obs, _ = env.reset(seed=episode_seed(seed, 0))
+        if goal is not None:
+            obs = _set_goal(env, np.asarray(goal, dtype=np.float64))
         frames = [env.render()]
         start, last_reward = True, 0.0
         while True:
@@ -235,3 +239,13 @@ def record_rollout(
         )
         tmp.replace(path)  # atomic: never a half-written GIF under the final name
     return frames
+
+
+def _set_goal(env, goal: np.ndarray) -> dict[str, np.ndarray]:
+    """Give a freshly reset panda-gym env another desired goal; its new observation."""
+    task = env.unwrapped.task
+    if goal.shape != task.goal.shape:
+        raise GcdtError(f"goal must have {task.goal.size} coordinates, got {goal.tolist()}")
+    task.goal = goal
+    env.unwrapped.sim.set_base_pose("target", goal, np.array([0.0, 0.0, 0.0, 1.0]))
+    return env.unwrapped._get_obs()

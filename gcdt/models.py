@@ -81,13 +81,21 @@ class _Block(nn.Module):
         self.fc_proj = nn.Linear(4 * cfg.hidden, cfg.hidden)
         self.resid_drop = nn.Dropout(cfg.dropout)
 
-    def forward(self, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, x: torch.Tensor, mask: torch.Tensor, attention: list[torch.Tensor] | None = None
+    ) -> torch.Tensor:
         b, t, h = x.shape  # [batch, 3K, hidden]
         q, k, v = self.qkv(self.ln_1(x)).split(h, dim=2)
         q, k, v = (z.view(b, t, self.heads, h // self.heads).transpose(1, 2) for z in (q, k, v))
-        y = F.scaled_dot_product_attention(
-            q, k, v, attn_mask=mask, dropout_p=self.dropout if self.training else 0.0
-        )  # [batch, heads, 3K, hidden / heads]
+        if attention is None:
+            y = F.scaled_dot_product_attention(
+                q, k, v, attn_mask=mask, dropout_p=self.dropout if self.training else 0.0
+            )  # [batch, heads, 3K, hidden / heads]
+        else:  # the same attention spelt out, to hand its weights to an inspector
+            scores = (q @ k.transpose(-2, -1)) / math.sqrt(h // self.heads)
+            weights = scores.masked_fill(~mask, float("-inf")).softmax(dim=-1)
+            attention.append(weights.detach())  # [batch, heads, 3K, 3K]
+            y = weights @ v
         x = x + self.resid_drop(self.proj(y.transpose(1, 2).reshape(b, t, h)))
         return x + self.resid_drop(self.fc_proj(F.relu(self.fc(self.ln_2(x)))))
 
@@ -119,8 +127,13 @@ class GoalConditionedDT(nn.Module):
         returns_to_go: torch.Tensor,  # [batch, K, 1], scaled
         timesteps: torch.Tensor,  # [batch, K] int64
         mask: torch.Tensor,  # [batch, K] bool, False on left padding
+        attention: list[torch.Tensor] | None = None,
     ) -> torch.Tensor:
-        """Predicted actions `[batch, K, action_dim]`, one per state token."""
+        """Predicted actions `[batch, K, action_dim]`, one per state token.
+
+        Pass a list as `attention` to receive each layer's attention weights
+        `[batch, heads, 3K, 3K]` (tokens R_1, s_1, a_1, R_2, ...), e.g. for the explorer.
+        """
         b, k, _ = states.shape
         time = self.embed_timestep(timesteps)  # [batch, K, hidden]
         tokens = torch.stack(
@@ -134,7 +147,7 @@ class GoalConditionedDT(nn.Module):
         x = self.embed_drop(self.embed_ln(tokens))
         attn_mask = _attention_mask(mask)
         for block in self.blocks:
-            x = block(x, attn_mask)
+            x = block(x, attn_mask, attention)
         x = self.ln_f(x).reshape(b, k, 3, self.cfg.hidden)
         return torch.tanh(self.predict_action(x[:, :, 1]))  # from the state tokens
 

@@ -75,3 +75,17 @@ def test_goal_conditioning_columns_and_bad_config():
         state_columns("push", "both")
     with pytest.raises(GcdtError, match="context K must be >= 1"):
         DTConfig(state_dim=6, action_dim=3, context=0)
+
+
+def test_attention_weights_match_the_fast_path(model):
+    inputs = _inputs()
+    inputs["mask"][0, :2] = False  # a left-padded window
+    attention: list[torch.Tensor] = []
+    with torch.no_grad():
+        fast = model(**inputs)
+        spelt_out = model(**inputs, attention=attention)
+    torch.testing.assert_close(spelt_out, fast, atol=1e-5, rtol=1e-5)
+    assert len(attention) == 3 and attention[0].shape == (3, 1, 18, 18)
+    torch.testing.assert_close(attention[0].sum(-1), torch.ones(3, 1, 18))
+    assert attention[0][0, 0, 6:, :6].abs().max() == 0  # real tokens never see padding
+    assert torch.triu(attention[1][1, 0], diagonal=1).abs().max() == 0  # causal

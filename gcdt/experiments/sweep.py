@@ -19,6 +19,7 @@ import multiprocessing
 import os
 import socket
 import time
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -70,19 +71,23 @@ class SweepSummary:
 
 
 def plan(profile: Profile, store: RunStore, only: str | None = None,
-         costs: CostModel | None = None) -> tuple[list[PlannedRun], list[str]]:  # fmt: skip
-    """Every run of the grid with its stored state and estimated cost; warnings for files
-    that are not trusted (corrupt results, JSON files of no run of this grid)."""
+         costs: CostModel | None = None, methods: Sequence[str] | None = None,
+         ) -> tuple[list[PlannedRun], list[str]]:  # fmt: skip
+    """Every run of the grid (of section `only`, of `methods`) with its stored state and
+    estimated cost; warnings for files that are not trusted (corrupt results, JSON files of no
+    run of this grid)."""
     costs = costs or CostModel.measured()
     planned, warnings = [], []
     for entry in build_grid(profile, only):
+        if methods is not None and entry.spec.method not in methods:
+            continue
         key = entry.spec.key()
         stored = store.read(key)
         if stored.problem:
             warnings.append(f"{stored.problem}: it will be run again")
         planned.append(PlannedRun(entry, key, stored.state, stored.problem,
                                   costs.estimate(entry.spec)))  # fmt: skip
-    if only is None:
+    if only is None and methods is None:
         keys = {p.key for p in planned}
         warnings += [f"{p} is not a result of this grid: ignored" for p in
                      store.foreign_files(keys)]  # fmt: skip
@@ -125,11 +130,12 @@ def sweep(
     backend: str = "local",
     address: str | None = None,
     only: str | None = None,
+    methods: Sequence[str] | None = None,
     workers: int | None = None,
     store_root: str | Path | None = None,
     progress: bool = True,
 ) -> SweepSummary:
-    """Run every run of `profile` (or of section `only`) whose result is not done yet."""
+    """Run every run of `profile` (of section `only`, of `methods`) not done yet."""
     if backend not in BACKENDS:
         raise GcdtError(f"unknown backend {backend!r}: expected one of {', '.join(BACKENDS)}")
     if address is not None and backend != "ray":
@@ -138,7 +144,7 @@ def sweep(
         _check_address(address)
     store = RunStore(store_root or results_dir(profile.name) / "runs")
     store.remove_partial_files()
-    planned, warnings = plan(profile, store, only)
+    planned, warnings = plan(profile, store, only, methods=methods)
     summary = SweepSummary(profile.name, planned, warnings=warnings)
     summary.skipped = [p.key for p in planned if p.state == "done"]
     todo = [p for p in planned if p.state != "done"]

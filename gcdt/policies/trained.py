@@ -98,6 +98,18 @@ class TrainedPolicy(Policy):
         self.actions[:, -1] = action
         return action.cpu().numpy().astype(np.float32)
 
+    @torch.no_grad()
+    def attention(self, env: int = 0) -> np.ndarray:
+        """Attention weights over env `env`'s current context, `[layers, heads, 3K, 3K]`
+        (tokens R, s, a per step, oldest first; left padding included). DT only."""
+        if self.method != "dt":
+            raise GcdtError("only a Decision Transformer has attention to show")
+        weights: list[torch.Tensor] = []
+        i = slice(env, env + 1)
+        self.model(self.states[i], self.actions[i], self.rtg[i], self.timesteps[i],
+                   self.mask[i], attention=weights)  # fmt: skip
+        return torch.cat(weights).cpu().numpy()
+
     def config(self) -> dict[str, Any]:
         return {
             **super().config(),

@@ -1,0 +1,177 @@
+"""Figures of the paper, as PNG and PDF under `figures/<profile>/`.
+
+* Fig. 1: the three environments, rendered headless (`environments_figure`).
+* Fig. 2: the GC-DT architecture, drawn from a model config (`architecture_figure`).
+* Fig. 3 (RQ4): success rate against dataset size (`dataset_size_figure`).
+* Fig. 4 (RQ5): success rate against the share of expert data (`expert_ratio_figure`).
+
+Fig. 3 and 4 read only the run results (`tables.load_runs`): one line per task, one panel per
+reward, the mean over seeds with its standard deviation as error bars.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import pandas as pd
+
+from gcdt.paths import REPO_ROOT
+from gcdt.report.tables import TASK_NAMES
+
+FORMATS = ("png", "pdf")
+
+
+def figures_dir(profile: str) -> Path:
+    return REPO_ROOT / "figures" / profile
+
+
+def save(fig: plt.Figure, out_dir: str | Path, name: str) -> list[Path]:
+    """Write `fig` as `name`.png and `name`.pdf into `out_dir`; return the paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / f"{name}.{ext}" for ext in FORMATS]
+    for path in paths:
+        fig.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(fig)
+    return paths
+
+
+def _success_panels(runs: pd.DataFrame, section: str, x: str, xlabel: str,
+                    scale: float = 1.0) -> plt.Figure:  # fmt: skip
+    """Success rate (%) against `x`: one panel per reward, one line per task, std over seeds."""
+    sel = runs[runs["sections"].apply(lambda s: section in s) & (runs["method"] == "gcdt")]
+    rewards = [r for r in ("dense", "sparse") if r in set(sel["reward"])]
+    fig, axes = plt.subplots(1, len(rewards), figsize=(5 * len(rewards), 3.6), squeeze=False,
+                             sharey=True)  # fmt: skip
+    for ax, reward in zip(axes[0], rewards, strict=True):
+        for task in TASK_NAMES:
+            cell = sel[(sel["reward"] == reward) & (sel["task"] == task)]
+            if cell.empty:
+                continue
+            stats = (cell.assign(pct=100 * cell["success_rate"]).groupby(x)["pct"]
+                     .agg(["mean", "std"]).fillna(0.0).sort_index())  # fmt: skip
+            ax.errorbar(stats.index * scale, stats["mean"], yerr=stats["std"], marker="o",
+                        capsize=3, label=TASK_NAMES[task])  # fmt: skip
+        ax.set_title(f"{reward.capitalize()} reward")
+        ax.set_xlabel(xlabel)
+        ax.set_ylim(-5, 105)
+        ax.grid(alpha=0.3)
+        ax.legend()
+    axes[0][0].set_ylabel("Success rate (%)")
+    fig.tight_layout()
+    return fig
+
+
+def dataset_size_figure(runs: pd.DataFrame) -> plt.Figure:
+    """Fig. 3 (RQ4): 'Impact of dataset size on success rate'."""
+    fig = _success_panels(runs, "rq4", "size", "Dataset size (transitions)")
+    fig.suptitle("Impact of dataset size on success rate", y=1.03)
+    return fig
+
+
+def expert_ratio_figure(runs: pd.DataFrame) -> plt.Figure:
+    """Fig. 4 (RQ5): 'Impact of expert data percentage'."""
+    fig = _success_panels(runs, "rq5", "expert_ratio", "Expert data (%)", scale=100.0)
+    fig.suptitle("Impact of expert data percentage", y=1.03)
+    return fig
+
+
+def environments_figure(seed: int = 0) -> plt.Figure:
+    """Fig. 1: Reach, Push and PickAndPlace at the start of a seeded episode."""
+    from gcdt.envs import make_env
+
+    fig, axes = plt.subplots(1, 3, figsize=(12, 4))
+    for ax, (task, title) in zip(axes, TASK_NAMES.items(), strict=True):
+        env = make_env(task, "sparse", render_width=480, render_height=480)
+        try:
+            env.reset(seed=seed)
+            ax.imshow(env.render())
+        finally:
+            env.close()
+        ax.set_title(title)
+        ax.axis("off")
+    fig.tight_layout()
+    return fig
+
+
+def architecture_figure(model_config: dict, task: str) -> plt.Figure:
+    """Fig. 2: the GC-DT token sequence and layers, labelled from `model_config` (DTConfig)."""
+    from gcdt.envs import get_task
+
+    spec = get_task(task)
+    k, hidden = model_config["context"], model_config["hidden"]
+    layers, heads = model_config["layers"], model_config["heads"]
+    fig, ax = plt.subplots(figsize=(11, 5))
+    ax.set_xlim(0, 11)
+    ax.set_ylim(0, 6.2)
+    ax.axis("off")
+
+    def box(x, y, w, h, text, color):
+        ax.add_patch(plt.Rectangle((x, y), w, h, facecolor=color, edgecolor="black", lw=1))
+        ax.text(x + w / 2, y + h / 2, text, ha="center", va="center", fontsize=8)
+
+    tokens = [("\\hat R", "#f4cccc"), ("s", "#cfe2f3"), ("a", "#d9ead3")]
+    for step, sub in enumerate(("t-2", "t-1", "t")):  # the newest steps of the K-step context
+        for j, (symbol, color) in enumerate(tokens):
+            x = 0.4 + step * 3.5 + j * 1.05
+            box(x, 0.3, 0.9, 0.6, f"${symbol}_{{{sub}}}$", color)
+            ax.annotate("", (x + 0.45, 1.6), (x + 0.45, 0.9),
+                        arrowprops={"arrowstyle": "->"})  # fmt: skip
+    box(0.4, 1.6, 10.1, 0.6, f"linear embeddings (hidden {hidden}) + timestep embedding, "
+        "LayerNorm (no positional embedding)", "#fff2cc")  # fmt: skip
+    box(0.4, 2.6, 10.1, 1.0, f"causal transformer: {layers} GPT-2 blocks, {heads} head(s), "
+        f"ReLU MLP, dropout {model_config['dropout']}, context K = {k} steps ({3 * k} tokens)",
+        "#eeeeee")  # fmt: skip
+    box(7.7, 4.2, 2.8, 0.6, "tanh action head on $s_t$ → $a_t$", "#d9ead3")
+    ax.annotate("", (9.1, 4.2), (9.1, 3.6), arrowprops={"arrowstyle": "->"})
+    state = (
+        f"$s_t$ = [observation ({spec.obs_dim}), desired goal ({spec.goal_dim}), achieved "
+        f"goal ({spec.goal_dim})] = {spec.state_dim} values on {TASK_NAMES.get(task, task)}"
+    )
+    ax.text(0.4, 5.3, state + "; $\\hat R_t$ = return-to-go / 100", fontsize=9)
+    ax.set_title("Goal-Conditioned Decision Transformer")
+    return fig
+
+
+def learning_curves_figure(curves: dict[str, pd.DataFrame], x: str, y: str, xlabel: str,
+                           ylabel: str, title: str) -> plt.Figure:  # fmt: skip
+    """One line per labelled curve (TQC+HER success against env steps, DT loss, ...)."""
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    for label, frame in curves.items():
+        ax.plot(frame[x], frame[y] * (100 if y == "success_rate" else 1), label=label)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    if len(curves) > 1:
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def attention_figure(weights, layer: int = -1) -> plt.Figure:
+    """What the newest state token attends to: one row per head of `layer`, tokens R, s, a
+    per context step (`weights` from `TrainedPolicy.attention()`, `[layers, heads, 3K, 3K]`)."""
+    w = weights[layer][:, -2]  # the newest state token's query row (the last token is a_t)
+    heads, n = w.shape
+    fig, ax = plt.subplots(figsize=(max(6, n / 5), 1 + 0.6 * heads))
+    ax.imshow(w, aspect="auto", cmap="viridis")
+    ax.set_xticks(range(n), ["R", "s", "a"] * (n // 3), fontsize=6)
+    ax.set_yticks(range(heads), [f"head {h}" for h in range(heads)])
+    ax.set_xlabel("context tokens, oldest first (left padding gets no weight)")
+    ax.set_title(f"Attention of the newest state token, layer {layer % len(weights)}")
+    fig.tight_layout()
+    return fig
+
+
+__all__ = [
+    "architecture_figure",
+    "attention_figure",
+    "dataset_size_figure",
+    "environments_figure",
+    "expert_ratio_figure",
+    "figures_dir",
+    "learning_curves_figure",
+    "save",
+]

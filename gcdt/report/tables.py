@@ -1,0 +1,165 @@
+"""Tables from `results/<profile>/runs/` alone: Table 1 (RQ1-RQ3) and the DT ablation.
+
+Each cell is the mean over seeds with its standard deviation and a bootstrap 95 % confidence
+interval of that mean (a single seed has no spread: its interval is the value itself), and
+Table 1 puts the paper's values beside ours. Written as CSV, Markdown and LaTeX (booktabs,
+laid out like the paper's table: rewards as blocks, methods as rows, tasks as columns).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from gcdt.errors import GcdtError
+from gcdt.experiments.grid import build_grid
+from gcdt.experiments.profiles import Profile
+from gcdt.experiments.store import RunStore, results_dir
+
+TASK_NAMES = {"reach": "Reach", "push": "Push", "pick_and_place": "PickAndPlace"}
+METHOD_NAMES = {"gcdt": "GC-DT", "bc": "BC", "tqc": "TQC+HER", "dt": "DT (no goal)",
+                "dt-desired": "DT (desired goal)"}  # fmt: skip
+#: Table 1 of the paper: (return, success %) per reward, method, task. Its "DT" is GC-DT.
+PAPER_TABLE1 = {
+    (reward, method): dict(zip(("reach", "push", "pick_and_place"), cells, strict=True))
+    for reward, method, cells in (
+        ("dense", "gcdt", ((-0.21, 100.0), (-0.95, 99.5), (-1.30, 98.9))),
+        ("dense", "bc", ((-0.21, 100.0), (-1.20, 95.9), (-1.35, 97.9))),
+        ("dense", "tqc", ((-0.21, 100.0), (-1.04, 98.7), (-1.35, 98.7))),
+        ("sparse", "gcdt", ((-1.72, 100.0), (-8.26, 95.0), (-7.63, 97.8))),
+        ("sparse", "bc", ((-1.76, 100.0), (-8.18, 94.6), (-9.01, 94.9))),
+        ("sparse", "tqc", ((-1.82, 100.0), (-4.54, 99.5), (-16.96, 77.0))),
+    )
+}
+BOOTSTRAP_SAMPLES = 10_000
+
+
+def load_runs(profile: Profile, root: str | Path | None = None) -> pd.DataFrame:
+    """One row per finished run of `profile`'s grid: its spec, sections and metrics."""
+    store = RunStore(Path(root) if root else results_dir(profile.name) / "runs")
+    rows = []
+    for entry in build_grid(profile):
+        stored = store.read(entry.spec.key())
+        if stored.state != "done":
+            continue
+        spec, metrics = entry.spec, stored.result["metrics"]
+        rows.append({
+            "key": spec.key(), "sections": entry.sections, "method": spec.method,
+            "task": spec.task, "reward": spec.reward, "seed": spec.seed,
+            "size": spec.data.size if spec.data else None,
+            "expert_ratio": spec.data.expert_ratio if spec.data else None,
+            "success_rate": metrics["success_rate"], "mean_return": metrics["mean_return"],
+            "episodes": metrics["episodes"],
+        })  # fmt: skip
+    if not rows:
+        raise GcdtError(
+            f"no finished runs of profile {profile.name!r} in {store.root}: run "
+            f"`gcdt sweep --profile {profile.name}` (or `make reproduce PROFILE={profile.name}`)"
+        )
+    return pd.DataFrame(rows)
+
+
+def bootstrap_ci(values: np.ndarray, seed: int = 0) -> tuple[float, float]:
+    """95 % percentile-bootstrap interval of the mean of `values` (seeds)."""
+    values = np.asarray(values, dtype=np.float64)
+    if len(values) < 2:
+        return float(values[0]), float(values[0])
+    rng = np.random.default_rng(seed)
+    means = rng.choice(values, (BOOTSTRAP_SAMPLES, len(values))).mean(axis=1)
+    low, high = np.percentile(means, [2.5, 97.5])
+    return float(low), float(high)
+
+
+def _aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
+    rows = []
+    for keys, group in runs.groupby(by, sort=False):
+        row = dict(zip(by, keys, strict=True))
+        for metric, scale in (("mean_return", 1.0), ("success_rate", 100.0)):
+            values = group[metric].dropna().to_numpy(dtype=np.float64) * scale
+            name = "return" if metric == "mean_return" else "success"
+            low, high = bootstrap_ci(values) if len(values) else (np.nan, np.nan)
+            row |= {f"{name}_mean": values.mean() if len(values) else np.nan,
+                    f"{name}_std": values.std(ddof=1) if len(values) > 1 else 0.0,
+                    f"{name}_ci_low": low, f"{name}_ci_high": high}  # fmt: skip
+        row["seeds"] = len(group)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def table1(runs: pd.DataFrame) -> pd.DataFrame:
+    """Table 1: per reward, method and task, our mean ± std (and CI) beside the paper's."""
+    sel = runs[runs["sections"].apply(lambda s: "table1" in s)]
+    table = _aggregate(sel, ["reward", "method", "task"])
+    paper = [PAPER_TABLE1.get((r.reward, r.method), {}).get(r.task, (np.nan, np.nan))
+             for r in table.itertuples()]  # fmt: skip
+    table["paper_return"] = [p[0] for p in paper]
+    table["paper_success"] = [p[1] for p in paper]
+    return _ordered(table, ["dense", "sparse"], ["gcdt", "bc", "tqc"])
+
+
+def ablation_table(runs: pd.DataFrame) -> pd.DataFrame:
+    """GC-DT against DT without goals and DT with the desired goal only, same data."""
+    full = runs[runs["sections"].apply(lambda s: "ablation" in s or "table1" in s)]
+    full = full[full["method"].isin(["gcdt", "dt-desired", "dt"])]
+    scoped = full.merge(
+        runs[runs["sections"].apply(lambda s: "ablation" in s)][["task", "reward"]]
+        .drop_duplicates(), on=["task", "reward"])  # fmt: skip
+    return _ordered(_aggregate(scoped, ["reward", "method", "task"]), ["dense", "sparse"],
+                    ["gcdt", "dt-desired", "dt"])  # fmt: skip
+
+
+def _ordered(table: pd.DataFrame, rewards: list[str], methods: list[str]) -> pd.DataFrame:
+    order = {
+        "reward": {r: i for i, r in enumerate(rewards)},
+        "method": {m: i for i, m in enumerate(methods)},
+        "task": {t: i for i, t in enumerate(TASK_NAMES)},
+    }
+    return table.sort_values(list(order), key=lambda c: c.map(order[c.name])).reset_index(drop=True)
+
+
+def _cell(row: pd.Series, paper: bool, pm: str = " ± ") -> str:
+    """'return / success' (mean ± std over seeds; one seed has no std to show)."""
+    if row["seeds"] > 1:
+        ours = (f"{row['return_mean']:.2f}{pm}{row['return_std']:.2f} / "
+                f"{row['success_mean']:.1f}{pm}{row['success_std']:.1f}")  # fmt: skip
+    else:
+        ours = f"{row['return_mean']:.2f} / {row['success_mean']:.1f}"
+    if paper and not np.isnan(row.get("paper_return", np.nan)):
+        ours += f" (paper {row['paper_return']:.2f} / {row['paper_success']:.1f})"
+    return ours
+
+
+def to_markdown(table: pd.DataFrame, paper: bool = True) -> str:
+    """Rewards as blocks, methods as rows, tasks as columns: 'return / success %' cells."""
+    tasks = [t for t in TASK_NAMES if t in set(table["task"])]
+    lines = ["| Method | " + " | ".join(TASK_NAMES[t] for t in tasks) + " |",
+             "|---|" + "---|" * len(tasks)]  # fmt: skip
+    for reward, block in table.groupby("reward", sort=False):
+        lines.append(f"| *{reward.capitalize()} reward* |" + " |" * len(tasks))
+        for method, rows in block.groupby("method", sort=False):
+            cells = {r["task"]: _cell(r, paper) for _, r in rows.iterrows()}
+            lines.append(f"| {METHOD_NAMES[method]} | "
+                         + " | ".join(cells.get(t, "–") for t in tasks) + " |")  # fmt: skip
+    return "\n".join(lines)
+
+
+def to_latex(table: pd.DataFrame, caption: str, label: str) -> str:
+    """A booktabs table laid out like the paper's Table 1 (return / success %, mean ± std)."""
+    tasks = [t for t in TASK_NAMES if t in set(table["task"])]
+    cols = len(tasks) + 2
+    out = [r"\begin{table*}[tb]", rf"\caption{{{caption}}}", rf"\label{{{label}}}",
+           r"\centering", r"\scriptsize", r"\setlength{\tabcolsep}{3pt}",
+           r"\begin{tabular}{l" + "c" * (cols - 1) + "}", r"\toprule",
+           r"\textbf{Method} & \textbf{Metric} & "
+           + " & ".join(rf"\textbf{{{TASK_NAMES[t]}}}" for t in tasks) + r" \\"]  # fmt: skip
+    for reward, block in table.groupby("reward", sort=False):
+        out += [r"\midrule", rf"\multicolumn{{{cols}}}{{c}}{{\textit{{{reward.capitalize()} "
+                r"Reward}} \\", r"\midrule"]  # fmt: skip
+        for method, rows in block.groupby("method", sort=False):
+            cells = {r["task"]: _cell(r, False, pm=" $\\pm$ ") for _, r in rows.iterrows()}
+            out.append(f"{METHOD_NAMES[method]} & Ret / Succ & "
+                       + " & ".join(cells.get(t, "--") for t in tasks) + r" \\")  # fmt: skip
+    out += [r"\bottomrule", r"\end{tabular}", r"\end{table*}"]
+    return "\n".join(out) + "\n"

@@ -1,0 +1,82 @@
+"""gcdt.report: tables and figures computed from result files with known metrics."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from gcdt.errors import GcdtError
+from gcdt.experiments import RunStore, build_grid
+from gcdt.experiments.grid import RUN_SCHEMA
+from gcdt.experiments.profiles import SMOKE, Scope
+from gcdt.report import figures, tables
+
+ALL = Scope(tasks=("reach", "push"), rewards=("sparse",))
+PROFILE = dataclasses.replace(SMOKE, name="report-test", seeds=(0, 1, 2), table1=ALL,
+                              table1_tqc=ALL, rq4=ALL, rq5=ALL, ablation=ALL)  # fmt: skip
+
+
+def _success(spec) -> float:
+    """A known, distinct success rate per run: grows with data size, ratio and seed."""
+    size = spec.data.size / spec.data.base_size if spec.data else 1.0
+    ratio = spec.data.expert_ratio if spec.data else 1.0
+    return round(0.5 * size * ratio + 0.1 * spec.seed + (0.2 if spec.method == "gcdt" else 0), 4)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    store = RunStore(tmp_path_factory.mktemp("runs"))
+    for entry in build_grid(PROFILE):
+        spec = entry.spec
+        store.write(spec.key(), {
+            "key": spec.key(), "schema": RUN_SCHEMA, "status": "done", "spec": spec.to_dict(),
+            "metrics": {"success_rate": _success(spec), "mean_return": -10 * spec.seed,
+                        "episodes": 20},
+        })  # fmt: skip
+    return tables.load_runs(PROFILE, store.root)
+
+
+def test_table1_aggregates_over_seeds_beside_the_paper(runs):
+    table = tables.table1(runs)
+    assert list(table["reward"].unique()) == ["sparse"]
+    assert list(table["method"].unique()) == ["gcdt", "bc", "tqc"]
+    row = table[(table["method"] == "gcdt") & (table["task"] == "reach")].iloc[0]
+    expected = 100 * np.array([0.7, 0.8, 0.9])  # size 1, ratio 1, +0.2 for gcdt, +0.1 * seed
+    assert row["success_mean"] == pytest.approx(expected.mean())
+    assert row["success_std"] == pytest.approx(expected.std(ddof=1))
+    assert expected.min() <= row["success_ci_low"] <= row["success_ci_high"] <= expected.max()
+    assert row["return_mean"] == pytest.approx(-10.0) and row["seeds"] == 3
+    assert (row["paper_return"], row["paper_success"]) == (-1.72, 100.0)
+    md = tables.to_markdown(table)
+    assert "| GC-DT | -10.00 ± 10.00 / 80.0 ± 10.0 (paper -1.72 / 100.0) |" in md
+    tex = tables.to_latex(table, "Performance", "tab:t1")
+    assert r"\multicolumn{4}{c}{\textit{Sparse Reward}} \\" in tex and r"\bottomrule" in tex
+
+
+def test_ablation_table_compares_goal_conditionings(runs):
+    table = tables.ablation_table(runs)
+    assert set(table["method"]) == {"gcdt", "dt-desired", "dt"}
+    gcdt, dt = (table[(table["method"] == m) & (table["task"] == "push")].iloc[0]
+                for m in ("gcdt", "dt"))  # fmt: skip
+    assert gcdt["success_mean"] - dt["success_mean"] == pytest.approx(20.0)
+
+
+def test_figures_plot_the_means_over_seeds(runs):
+    fig = figures.dataset_size_figure(runs)
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "Dataset size (transitions)"
+    assert ax.get_ylabel() == "Success rate (%)" and ax.get_title() == "Sparse reward"
+    line = ax.lines[0]  # Reach
+    np.testing.assert_array_equal(line.get_xdata(), PROFILE.rq4_sizes)
+    sizes = np.array(PROFILE.rq4_sizes) / PROFILE.dataset_size
+    ydata = np.asarray(line.get_ydata(), dtype=float)
+    np.testing.assert_allclose(ydata, 100 * (0.5 * sizes + 0.2 + 0.1))
+    fig = figures.expert_ratio_figure(runs)
+    np.testing.assert_array_equal(fig.axes[0].lines[0].get_xdata(), [0, 50, 100])
+
+
+def test_no_results_say_what_to_run(tmp_path):
+    with pytest.raises(GcdtError, match="run `gcdt sweep --profile report-test`"):
+        tables.load_runs(PROFILE, tmp_path)

@@ -225,7 +225,7 @@ def train_tqc(
         device=device,
         verbose=0,
     )
-    # Travels inside every saved zip: what `load_tqc_policy` checks a model against.
+    # Travels inside every saved zip: what `TQCPolicy` checks a model against.
     model.gcdt = {"task": spec.name, "reward": reward, "config": cfg.name, "seed": seed}
     evaluator = _PeriodicEvaluation(
         model, out, spec.name, reward, eval_every, eval_episodes, seed + EVAL_SEED_OFFSET

@@ -452,12 +452,15 @@ def _tqc_train(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace) -> int:
     from gcdt.experiments import get_profile, plan, results_dir, sweep
+    from gcdt.experiments.costs import CostModel
     from gcdt.experiments.store import RunStore
     from gcdt.experiments.sweep import default_workers, shared_cost
 
     profile = get_profile(args.profile)
     if args.dry_run:
-        planned, warnings = plan(profile, RunStore(results_dir(profile.name) / "runs"), args.only)
+        costs = CostModel.measured()  # reads the bench JSON and every result file: once
+        store = RunStore(results_dir(profile.name) / "runs")
+        planned, warnings = plan(profile, store, args.only, costs)
         for warning in warnings:
             print(f"warning: {warning}", file=sys.stderr)
         for p in planned:
@@ -465,7 +468,7 @@ def _sweep(args: argparse.Namespace) -> int:
                   f"{p.entry.spec.label}  [{', '.join(p.entry.sections)}]")  # fmt: skip
         todo = [p for p in planned if p.state != "done"]
         workers = args.workers or default_workers(profile)
-        total = sum(p.estimate_seconds for p in todo) + shared_cost(todo)
+        total = sum(p.estimate_seconds for p in todo) + shared_cost(todo, costs)
         print(
             f"{len(planned)} runs, {len(todo)} to run: about {total / 3600:.1f} h of work, "
             f"{total / 3600 / workers:.1f} h on {workers} worker(s) (estimate)"

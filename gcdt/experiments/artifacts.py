@@ -51,8 +51,7 @@ def tqc_agent(spec: TQCSpec) -> Path:
             changes = dict(spec.budget)
             if spec.steps is not None:
                 changes["steps"] = spec.steps
-            cfg = cfg.with_budget(**{k: list(v) if isinstance(v, tuple) else v
-                                     for k, v in changes.items()})  # fmt: skip
+            cfg = cfg.with_budget(**changes)
             train_tqc(spec.task, spec.reward, cfg, out, seed=spec.seed, eval_every=spec.eval_every,
                       eval_episodes=spec.eval_episodes, progress=False)  # fmt: skip
     return model

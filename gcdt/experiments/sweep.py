@@ -144,7 +144,8 @@ def sweep(
         _check_address(address)
     store = RunStore(store_root or results_dir(profile.name) / "runs")
     store.remove_partial_files()
-    planned, warnings = plan(profile, store, only, methods=methods)
+    # The estimates matter to --dry-run only: defaults, without reading every result file.
+    planned, warnings = plan(profile, store, only, CostModel(), methods=methods)
     summary = SweepSummary(profile.name, planned, warnings=warnings)
     summary.skipped = [p.key for p in planned if p.state == "done"]
     todo = [p for p in planned if p.state != "done"]

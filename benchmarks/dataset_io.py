@@ -1,6 +1,6 @@
 """Dataset I/O: save and load of 1M transitions, Minari export and import of 100k.
 
-    python benchmarks/dataset_io.py [--task push] [--collect 10000] [--transitions 1000000]
+    python benchmarks/dataset_io.py [--task push] [--collect 5000] [--transitions 1000000]
 
 Writes results/bench/dataset_io_<task>.json. A real scripted-expert dataset of `--collect`
 transitions is collected once and its episodes repeated up to `--transitions` (collecting 1M
@@ -32,7 +32,7 @@ def _timed(fn):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="push")
-    parser.add_argument("--collect", type=int, default=10_000)
+    parser.add_argument("--collect", type=int, default=5_000)
     parser.add_argument("--transitions", type=int, default=1_000_000)
     parser.add_argument("--minari-transitions", type=int, default=100_000)
     args = parser.parse_args()

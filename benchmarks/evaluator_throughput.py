@@ -1,49 +1,162 @@
-"""Evaluator throughput (env steps/s) next to the raw simulator, for 1 and N envs.
+"""Evaluation throughput (env steps/s) of GC-DT: `evaluate` vs the simulator and vs the
+authors' loop.
 
-    python benchmarks/evaluator_throughput.py [--task push] [--timesteps 6000] [--envs 2]
+    python benchmarks/evaluator_throughput.py [--task push] [--timesteps 2000] [--envs 16]
+                                              [--authors-timesteps 500] [--repeats 3]
 
-Writes results/bench/evaluator_throughput_<task>.json (machine info included) and prints it.
-Compared in one run, on one machine: raw stepping of one env in-process with random actions,
-raw stepping of the vector env with random actions (the ceiling for N envs), and `evaluate`
-with the random and the scripted policy on the same vector env sizes.
+Writes results/bench/evaluator_throughput_<task>.json. Compared in one run, on one machine,
+each cell the median of interleaved repeats, resets included:
+* `raw_vector_<N>_envs`: the vector env of N processes stepped with random actions and
+  nothing else, the ceiling for anything that steps N envs;
+* `evaluate_gcdt_<N>_envs`: `gcdt.evaluation.evaluate` running a GC-DT checkpoint (the
+  paper's config) on the same N envs; also with 1 env, for `--authors-timesteps` steps;
+* `authors_unbatched`: the authors' evaluation, one episode at a time on one in-process env,
+  the context re-padded with `torch.cat` every step and the whole sequence run through
+  HuggingFace `DecisionTransformerModel` (their model; gcdt's equivalent model when
+  `transformers` is not installed), the action taken from the last position.
+The DT's weights come from one training step: speed depends on the shapes, not on the
+weights (both DT paths see the same untrained behaviour).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
 
-from common import raw_single, raw_vector, write_report
+import numpy as np
+import torch
+from common import raw_vector, write_report
 
+from gcdt.data import collect
+from gcdt.envs import episode_seed, goal_state, make_env
 from gcdt.evaluation import evaluate
 from gcdt.policies import make_policy
+from gcdt.policies.trained import TrainedPolicy
+from gcdt.training import TrainConfig, load_checkpoint, train
+
+
+def _checkpoint(task: str, tmp: Path) -> Path:
+    data = collect(make_policy("random", task), task, 200, progress=False)
+    return train(data, TrainConfig(steps=1), tmp / "dt", progress=False).checkpoint
+
+
+def _authors_model(ckpt: dict) -> tuple[Callable[..., torch.Tensor], str]:
+    """(forward returning action predictions [1, T, action_dim], which model it is)."""
+    cfg = ckpt["model_config"]
+    try:
+        import transformers
+    except ImportError:
+        policy = TrainedPolicy(ckpt)
+        return policy.model, "gcdt GoalConditionedDT (transformers not installed)"
+    hf = transformers.DecisionTransformerModel(
+        transformers.DecisionTransformerConfig(
+            state_dim=cfg["state_dim"],
+            act_dim=cfg["action_dim"],
+            hidden_size=cfg["hidden"],
+            n_layer=cfg["layers"],
+            n_head=cfg["heads"],
+            activation_function="relu",
+            max_ep_len=cfg["max_episode_steps"],
+            action_tanh=True,
+        )
+    ).eval()
+
+    def forward(states, actions, rtg, timesteps, mask):
+        return hf(states=states, actions=actions, returns_to_go=rtg, timesteps=timesteps,
+                  attention_mask=mask.long(), return_dict=False)[1]  # fmt: skip
+
+    return forward, f"transformers {transformers.__version__} DecisionTransformerModel"
+
+
+@torch.no_grad()
+def authors_unbatched(task: str, ckpt: dict, timesteps: int) -> float:
+    """Steps/s of the authors' evaluation loop (HF's `get_action` recipe) on one env."""
+    model, _ = _authors_model(ckpt)
+    k, scale = ckpt["model_config"]["context"], ckpt["train_config"]["return_scale"]
+    mean, std = ckpt["state_mean"], ckpt["state_std"]
+    a_dim = ckpt["model_config"]["action_dim"]
+    with contextlib.closing(make_env(task, "sparse")) as env:
+        started, steps, episode = time.perf_counter(), 0, 0
+        while steps < timesteps:
+            obs, _ = env.reset(seed=episode_seed(0, episode))
+            state = lambda o: torch.as_tensor(goal_state(o), dtype=torch.float32)  # noqa: E731
+            states, actions = state(obs)[None], torch.zeros(0, a_dim)
+            rtg, ts = torch.zeros(1, 1), torch.zeros(1, 1, dtype=torch.long)
+            done = False
+            while not done and steps < timesteps:
+                actions = torch.cat([actions, torch.zeros(1, a_dim)])
+                s, a, r, t = ((states - mean) / std)[-k:], actions[-k:], rtg[0, -k:], ts[0, -k:]
+                pad = k - s.shape[0]  # left padding, rebuilt every step
+                mask = torch.cat([torch.zeros(pad), torch.ones(s.shape[0])])[None]
+                s = torch.cat([torch.zeros(pad, s.shape[1]), s])[None]
+                a = torch.cat([torch.zeros(pad, a_dim), a])[None]
+                r = torch.cat([torch.zeros(pad), r])[None, :, None]
+                t = torch.cat([torch.zeros(pad, dtype=torch.long), t])[None]
+                action = model(s, a, r, t, mask.bool())[0, -1]
+                actions[-1] = action
+                obs, reward, terminated, truncated, _ = env.step(action.numpy())
+                states = torch.cat([states, state(obs)[None]])
+                rtg = torch.cat([rtg, (rtg[0, -1] - reward / scale).reshape(1, 1)], dim=1)
+                ts = torch.cat([ts, torch.full((1, 1), ts[0, -1] + 1)], dim=1)
+                done, steps = terminated or truncated, steps + 1
+            episode += 1
+        return steps / (time.perf_counter() - started)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="push")
-    parser.add_argument("--timesteps", type=int, default=6000)
-    parser.add_argument("--envs", type=int, default=2)
+    parser.add_argument("--timesteps", type=int, default=2000)
+    parser.add_argument("--envs", type=int, default=16)
+    parser.add_argument("--authors-timesteps", type=int, default=500)
+    parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    rows = {"raw_single_env": raw_single(args.task, args.timesteps)}
-    for n in sorted({1, args.envs}):
-        rows[f"raw_vector_{n}_envs"] = raw_vector(args.task, args.timesteps, n)
-        for name in ("random", "scripted"):
-            result = evaluate(
-                make_policy(name, args.task),
-                args.task,
-                "sparse",
-                timesteps=args.timesteps,
-                n_envs=n,
-                progress=False,
-            )
-            rows[f"evaluate_{name}_{n}_envs"] = result.summary["steps_per_second"]
+    n, task = args.envs, args.task
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _checkpoint(task, Path(tmp))
+        ckpt = load_checkpoint(path)
+
+        def gcdt(n_envs: int, timesteps: int) -> float:
+            result = evaluate(TrainedPolicy(path, task), task, "sparse",
+                              timesteps=timesteps, n_envs=n_envs, progress=False)  # fmt: skip
+            return result.summary["steps_per_second"]
+
+        cells: dict[str, Callable[[], float]] = {
+            f"raw_vector_{n}_envs": lambda: raw_vector(task, args.timesteps, n),
+            f"evaluate_gcdt_{n}_envs": lambda: gcdt(n, args.timesteps),
+            # As many steps as the authors' loop: one env is as slow as it, per step.
+            "evaluate_gcdt_1_envs": lambda: gcdt(1, args.authors_timesteps),
+            "authors_unbatched": lambda: authors_unbatched(task, ckpt, args.authors_timesteps),
+        }
+        samples: dict[str, list[float]] = {k: [] for k in cells}
+        for _ in range(args.repeats):  # interleaved: this VM's speed drifts within minutes
+            for key, measure in cells.items():
+                samples[key].append(measure())
+        authors_model = _authors_model(ckpt)[1]
+    rows = {k: float(np.median(v)) for k, v in samples.items()}
+    ours = rows[f"evaluate_gcdt_{n}_envs"]
+    rows[f"evaluate_gcdt_{n}_envs_vs_raw"] = ours / rows[f"raw_vector_{n}_envs"]
+    rows[f"evaluate_gcdt_{n}_envs_vs_authors"] = ours / rows["authors_unbatched"]
     report = {
-        "unit": "env steps per second",
-        "task": args.task,
+        "unit": "env steps per second, median of repeats; *_vs_* are ratios",
+        "task": task,
+        "envs": n,
         "timesteps": args.timesteps,
-        "results": {k: round(v, 1) for k, v in rows.items()},
+        "authors_timesteps": args.authors_timesteps,
+        "authors_model": authors_model,
+        "targets": {
+            f"evaluate_gcdt_{n}_envs_vs_raw": ">= 0.7",
+            f"evaluate_gcdt_{n}_envs_vs_authors": ">= 4",
+        },
+        "torch_threads": torch.get_num_threads(),
+        "results": {k: round(v, 3 if "_vs_" in k else 1) for k, v in rows.items()},
+        "samples": {k: [round(x, 1) for x in v] for k, v in samples.items()},
     }
-    write_report(f"evaluator_throughput_{args.task}", "evaluator_throughput.py", report)
+    write_report(f"evaluator_throughput_{task}", "evaluator_throughput.py", report)
 
 
 if __name__ == "__main__":

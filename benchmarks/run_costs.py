@@ -48,7 +48,7 @@ def _worker(args: tuple[str, int, int, int, int]) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dt-steps", type=int, default=150)
+    parser.add_argument("--dt-steps", type=int, default=100)
     parser.add_argument("--bc-steps", type=int, default=1000)
     parser.add_argument("--eval-steps", type=int, default=1000)
     args = parser.parse_args()

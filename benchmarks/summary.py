@@ -32,50 +32,112 @@ def _table(header: list[str], rows: list[list]) -> str:
     return "\n".join(lines)
 
 
-def evaluator_section() -> str | None:
-    runs = {t: _load(f"evaluator_throughput_{t}") for t in TASKS}
-    if not any(runs.values()):
+def _pct(x: float) -> str:
+    return f"{100 * x:.0f} %"
+
+
+def _rate(res: dict, key: str, ratio: str) -> str:
+    return f"{res[key]:.0f} ({_pct(res[ratio])})"
+
+
+def _verdict(ok: bool) -> str:
+    return "yes" if ok else "**no**"
+
+
+def targets_section() -> str | None:
+    """The issue's targets beside what this machine measured."""
+    rows = []
+    train = _load("training_throughput")
+    if train is not None:
+        res = train["results"]
+        if res.get("speedup_vs_huggingface_fp32") is not None:
+            x = res["speedup_vs_huggingface_fp32"]
+            rows.append(["DT training step vs HF `DecisionTransformerModel`, fp32",
+                         f"{x:.2f}x", ">= 1.5x", _verdict(x >= 1.5)])  # fmt: skip
+        if res.get("speedup_vs_huggingface_bf16") is not None:
+            x = res["speedup_vs_huggingface_bf16"]
+            rows.append(["DT training step vs HF, bf16 autocast", f"{x:.2f}x", "-", "-"])
+        share = res["dt_sampler_share"]
+        rows.append(["batch sampling, share of a DT step", f"{100 * share:.1f} %", "<= 5 %",
+                     _verdict(share <= 0.05)])  # fmt: skip
+    ev = _load("evaluator_throughput_push")
+    if ev is not None and "envs" in ev:
+        n, res = ev["envs"], ev["results"]
+        vs_raw, vs_authors = (
+            res[f"evaluate_gcdt_{n}_envs_vs_raw"],
+            res[f"evaluate_gcdt_{n}_envs_vs_authors"],
+        )
+        ceiling = res[f"raw_vector_{n}_envs"] / res["authors_unbatched"]
+        rows.append([f"`evaluate` GC-DT on {n} envs vs raw random stepping of {n} envs (Push)",
+                     _pct(vs_raw), ">= 70 %", _verdict(vs_raw >= 0.7)])  # fmt: skip
+        rows.append([f"`evaluate` GC-DT on {n} envs vs the authors' unbatched loop (Push; "
+                     f"the simulator alone is {ceiling:.1f}x)", f"{vs_authors:.1f}x", ">= 4x",
+                     _verdict(vs_authors >= 4)])  # fmt: skip
+    for t in TASKS:
+        r = _load(f"collection_throughput_{t}")
+        if r is None or "envs" not in r:
+            continue
+        n, res = r["envs"], r["results"]
+        x, own = (
+            res[f"collect_scripted_{n}_envs_vs_raw"],
+            res[f"collect_scripted_{n}_envs_vs_raw_scripted"],
+        )
+        rows.append([f"collection, scripted expert vs raw random stepping, {n} processes ({t}; "
+                     f"vs the expert stepped without recording: {_pct(own)})", _pct(x),
+                     ">= 80 %", _verdict(x >= 0.8)])  # fmt: skip
+    io = _load("dataset_io_push")
+    if io is not None:
+        x = io["results"]["load_training_ready_seconds"]
+        rows.append([f"load {io['results']['transitions']:,} transitions to training-ready arrays",
+                     f"{x:.2f} s", "< 3 s", _verdict(x < 3)])  # fmt: skip
+    e2e = _load("end_to_end")
+    if e2e is not None and "make_reproduce_smoke_seconds" in e2e["results"]:
+        x = e2e["results"]["make_reproduce_smoke_seconds"]
+        rows.append(["`make reproduce PROFILE=smoke`, from scratch", f"{x / 60:.1f} min", "-", "-"])
+    if not rows:
         return None
-    keys = [
-        ("raw_single_env", "raw, 1 env in-process"),
-        ("raw_vector_1_envs", "raw vector, 1 env"),
-        ("evaluate_random_1_envs", "evaluate random, 1 env"),
-        ("evaluate_scripted_1_envs", "evaluate scripted, 1 env"),
-        ("raw_vector_2_envs", "raw vector, 2 envs"),
-        ("evaluate_random_2_envs", "evaluate random, 2 envs"),
-        ("evaluate_scripted_2_envs", "evaluate scripted, 2 envs"),
-    ]
+    return "Targets (each measured side by side in one run on this machine):\n\n" + _table(
+        ["comparison", "measured", "target", "met"], rows
+    )
+
+
+def evaluator_section() -> str | None:
+    r = _load("evaluator_throughput_push")
+    if r is None or "envs" not in r:
+        return None
+    n, res = r["envs"], r["results"]
     rows = [
-        [t, *(f"{r['results'][k]:.0f}" for k, _ in keys)] for t, r in runs.items() if r is not None
-    ]
-    return "Evaluator throughput, env steps/s (`benchmarks/evaluator_throughput.py`):\n\n" + _table(
-        ["task", *(label for _, label in keys)], rows
+        [f"raw vector env, {n} processes, random actions (ceiling)",
+         f"{res[f'raw_vector_{n}_envs']:.0f}"],
+        [f"`evaluate`, GC-DT, {n} envs", f"{res[f'evaluate_gcdt_{n}_envs']:.0f}"],
+        ["`evaluate`, GC-DT, 1 env (as a local sweep runs it)",
+         f"{res['evaluate_gcdt_1_envs']:.0f}"],
+        [f"authors' loop: 1 env, context re-padded every step ({r['authors_model']})",
+         f"{res['authors_unbatched']:.0f}"],
+    ]  # fmt: skip
+    return (
+        f"Evaluation throughput on Push, env steps/s, resets included "
+        f"(`benchmarks/evaluator_throughput.py`, {r['torch_threads']} torch threads):\n\n"
+        + _table(["what", "env steps / s"], rows)
     )
 
 
 def collection_section() -> str | None:
     runs = {t: _load(f"collection_throughput_{t}") for t in TASKS}
-    if not any(runs.values()):
-        return None
     rows = []
     for t, r in runs.items():
-        if r is None:
+        if r is None or "envs" not in r:
             continue
-        res = r["results"]
-        for n in (1, 2):
-            rows.append(
-                [
-                    t,
-                    n,
-                    f"{res[f'raw_vector_{n}_envs']:.0f}",
-                    f"{res[f'collect_random_{n}_envs']:.0f} "
-                    f"({100 * res[f'collect_random_{n}_envs_vs_raw']:.0f} %)",
-                    f"{res[f'collect_scripted_{n}_envs']:.0f} "
-                    f"({100 * res[f'collect_scripted_{n}_envs_vs_raw']:.0f} %)",
-                    f"{res[f'raw_vector_scripted_{n}_envs']:.0f} "
-                    f"({100 * res[f'collect_scripted_{n}_envs_vs_raw_scripted']:.0f} %)",
-                ]
-            )
+        n, res = r["envs"], r["results"]
+        rows.append([
+            t, n, f"{res[f'raw_vector_{n}_envs']:.0f}",
+            _rate(res, f"collect_random_{n}_envs", f"collect_random_{n}_envs_vs_raw"),
+            _rate(res, f"collect_scripted_{n}_envs", f"collect_scripted_{n}_envs_vs_raw"),
+            _rate(res, f"raw_vector_scripted_{n}_envs",
+                  f"collect_scripted_{n}_envs_vs_raw_scripted"),
+        ])  # fmt: skip
+    if not rows:
+        return None
     return (
         "Collection throughput, transitions/s, stepping loop only "
         "(`benchmarks/collection_throughput.py`; % of raw random stepping on the same "
@@ -127,19 +189,38 @@ def io_section() -> str | None:
 
 def training_section() -> str | None:
     r = _load("training_throughput")
-    if r is None:
+    if r is None or "gcdt_fp32_ms_per_step" not in r["results"]:
         return None
     res = r["results"]
-    rows = [
-        [label, f"{res[f'{k}_ms_per_step']:.0f}", f"{res[f'{k}_samples_per_second']:.0f}",
-         f"{100 * res[f'{k}_sampler_share']:.1f} %"]
-        for k, label in (("dt_fp32", "DT, fp32"), ("dt_bf16", "DT, bf16 autocast"),
-                         ("bc_fp32", "BC, fp32"))
-    ]  # fmt: skip
+    cells = (
+        ("gcdt_fp32", "GC-DT, gcdt, fp32"),
+        ("huggingface_fp32", "GC-DT, HF (authors), fp32"),
+        ("gcdt_bf16", "GC-DT, gcdt, bf16 autocast"),
+        ("huggingface_bf16", "GC-DT, HF (authors), bf16 autocast"),
+        ("bc_fp32", "BC, fp32"),
+    )
+    rows = [[label, f"{res[f'{k}_ms_per_step']:.1f}", f"{res[f'{k}_samples_per_second']:.0f}"]
+            for k, label in cells if f"{k}_ms_per_step" in res]  # fmt: skip
     return (
         f"Training step, batch 64, the paper's DT config (`benchmarks/training_throughput.py`, "
-        f"{r['torch_threads']} torch threads):\n\n"
-        + _table(["model", "ms / step", "samples / s", "batch sampling share"], rows)
+        f"{r['torch_threads']} torch threads, {r['huggingface']}):\n\n"
+        + _table(["model", "ms / step", "samples / s"], rows)
+    )
+
+
+def end_to_end_section() -> str | None:
+    r = _load("end_to_end")
+    if r is None:
+        return None
+    q = r["results"]["quick_grid"]
+    rows = [[k, f"{v / 60:.1f}", f"{q['measured_seconds_per_run'][k] / 60:.1f}"
+             if k in q["measured_seconds_per_run"] else "-"]
+            for k, v in q["estimated_seconds_per_run"].items()]  # fmt: skip
+    return (
+        f"The quick grid's cost per run, minutes (`benchmarks/end_to_end.py`; estimated from "
+        f"the benchmarks' rates, and measured from {q['measured_runs']} finished runs in "
+        f"results/quick/; {q['runs']} runs, about {q['estimated_wall_hours']:.1f} h on "
+        f"{q['workers']} workers):\n\n" + _table(["run", "estimated", "measured"], rows)
     )
 
 
@@ -189,10 +270,12 @@ def summary() -> str:
     sections = [
         s
         for s in (
+            targets_section(),
+            training_section(),
             evaluator_section(),
             collection_section(),
             io_section(),
-            training_section(),
+            end_to_end_section(),
             tqc_section(),
         )
         if s

@@ -1,17 +1,27 @@
-"""Training step cost of the paper's DT config (batch 64, K 20, hidden 128, 3 layers) and BC.
+"""DT training throughput: gcdt's trainer step vs the authors' HuggingFace path, and BC's.
 
-    python benchmarks/training_throughput.py [--steps 30] [--repeats 3]
+    python benchmarks/training_throughput.py [--steps 10] [--repeats 3]
 
-Writes results/bench/training_throughput.json: ms per full training step (sample, forward,
-backward, clip, AdamW) in fp32 and with bf16 autocast, BC's, and the batch sampler's share.
-Data: a PickAndPlace-shaped dataset of 1,000 50-step episodes (the step cost depends on the
-shapes only). Each cell is the median over interleaved repeats.
+Writes results/bench/training_throughput.json. One full training step (forward, masked MSE,
+backward, clip 0.25, AdamW) of the paper's config (batch 64, K 20, hidden 128, 3 layers,
+1 head, dropout 0.1) in fp32 and with bf16 autocast, for
+* gcdt: `gcdt.training.train_step` with `make_optimizer`, as `gcdt train` runs it;
+* the authors' path: HuggingFace `transformers.DecisionTransformerModel` (the same config,
+  ReLU, tanh actions) with the masked-MSE loss of their trainer and torch's AdamW (the HF
+  Trainer's `adamw_torch`). Optional: the cell is skipped, and said so, when `transformers`
+  is not installed (`make bench` installs it).
+Both step on the very same batches, drawn beforehand by gcdt's sampler, whose own cost is
+reported as its share of gcdt's step. Data: a PickAndPlace-shaped dataset of 1,000 50-step
+episodes (the cost depends on shapes only). Cells run interleaved, each gcdt cell beside its HF
+twin; a cell's time is the median of the repeats, the speed-up the median of the repeats'
+paired ratios.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 from dataclasses import asdict
 
 import numpy as np
@@ -21,7 +31,9 @@ from common import write_report
 from gcdt.data import from_episodes
 from gcdt.envs import compute_rewards
 from gcdt.models import BCConfig, DTConfig
-from gcdt.training import TrainConfig, WindowSampler, build_model, train_step
+from gcdt.training import TrainConfig, WindowSampler, build_model, make_optimizer, train_step
+
+CPU = torch.device("cpu")
 
 
 def _dataset(episodes: int = 1000, length: int = 50):
@@ -45,61 +57,137 @@ def _dataset(episodes: int = 1000, length: int = 50):
     return from_episodes("pick_and_place", eps, {"source": "benchmark"})
 
 
-def _ms_per_step(dataset, cfg: TrainConfig, steps: int) -> tuple[float, float]:
-    """(ms per training step, ms per batch sample) after a warm-up."""
+def _time(step: Callable[[int], object], steps: int) -> float:
+    """ms per call of `step(i)` after a warm-up of 3 calls."""
+    for i in range(3):
+        step(i)
+    began = time.perf_counter()
+    for i in range(steps):
+        step(i)
+    return 1e3 * (time.perf_counter() - began) / steps
+
+
+def _gcdt(cfg: TrainConfig, dim: int, batches: list[dict[str, torch.Tensor]]):
     torch.manual_seed(0)
-    d, a = dataset.spec.state_dim, dataset.spec.action_dim
+    d, a = dim, 4
     config = DTConfig(d, a) if cfg.method == "dt" else BCConfig(d, a)
-    model = build_model(cfg.method, asdict(config))
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    sampler = WindowSampler(dataset, cfg, np.zeros(d, np.float32), np.ones(d, np.float32),
-                            torch.device("cpu"))  # fmt: skip
-    rng = np.random.default_rng(0)
+    model = build_model(cfg.method, asdict(config)).train()
+    opt = make_optimizer(model, cfg)
+    return lambda i: train_step(model, opt, batches[i % len(batches)], cfg, CPU)
 
-    def step():
-        train_step(model, opt, sampler.sample(rng), cfg, torch.device("cpu"))
 
-    for _ in range(3):
-        step()
-    started = time.perf_counter()
-    for _ in range(steps):
-        step()
-    per_step = (time.perf_counter() - started) / steps
-    started = time.perf_counter()
-    for _ in range(steps):
-        sampler.sample(rng)
-    return 1e3 * per_step, 1e3 * (time.perf_counter() - started) / steps
+def _huggingface(bf16: bool, dim: int, batches: list[dict[str, torch.Tensor]]):
+    import transformers
+
+    torch.manual_seed(0)
+    config = transformers.DecisionTransformerConfig(
+        state_dim=dim, act_dim=4, hidden_size=128, n_layer=3, n_head=1, n_inner=None,
+        activation_function="relu", resid_pdrop=0.1, embd_pdrop=0.1, attn_pdrop=0.1,
+        max_ep_len=1000, action_tanh=True,
+    )  # fmt: skip
+    model = transformers.DecisionTransformerModel(config).train()
+    opt = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=1e-4)
+
+    def step(i: int) -> None:
+        b = batches[i % len(batches)]
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            _, pred, _ = model(
+                states=b["states"], actions=b["actions"], returns_to_go=b["returns_to_go"],
+                timesteps=b["timesteps"], attention_mask=b["mask"].long(), return_dict=False,
+            )  # fmt: skip
+            keep = b["mask"].reshape(-1)  # the authors' loss: real tokens only
+            loss = torch.mean((pred.reshape(-1, 4)[keep] - b["actions"].reshape(-1, 4)[keep]) ** 2)
+        opt.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 0.25)
+        opt.step()
+
+    return step
+
+
+def _has_transformers() -> bool:
+    try:
+        import transformers  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=30)
+    parser.add_argument("--steps", type=int, default=10)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     dataset = _dataset()
-    cells = {
-        "dt_fp32": TrainConfig(steps=1),
-        "dt_bf16": TrainConfig(steps=1, bf16=True),
-        "bc_fp32": TrainConfig(method="bc", steps=1),
+    dim = dataset.spec.state_dim
+    rng = np.random.default_rng(0)
+    samplers = {
+        method: WindowSampler(
+            dataset,
+            TrainConfig(method=method),
+            np.zeros(dim, np.float32),
+            np.ones(dim, np.float32),
+            CPU,
+        )
+        for method in ("dt", "bc")
     }
-    samples: dict[str, list[tuple[float, float]]] = {k: [] for k in cells}
+    batches = {m: [s.sample(rng) for _ in range(8)] for m, s in samplers.items()}
+    hf = _has_transformers()
+    # Each gcdt cell right beside its HF twin: this VM's speed drifts within minutes.
+    cells: dict[str, Callable[[], Callable[[int], object]]] = {
+        "gcdt_fp32": lambda: _gcdt(TrainConfig(), dim, batches["dt"]),
+        **({"huggingface_fp32": lambda: _huggingface(False, dim, batches["dt"])} if hf else {}),
+        "gcdt_bf16": lambda: _gcdt(TrainConfig(bf16=True), dim, batches["dt"]),
+        **({"huggingface_bf16": lambda: _huggingface(True, dim, batches["dt"])} if hf else {}),
+        "bc_fp32": lambda: _gcdt(TrainConfig(method="bc"), dim, batches["bc"]),
+        "dt_sampler": lambda: lambda i: samplers["dt"].sample(rng),
+        "bc_sampler": lambda: lambda i: samplers["bc"].sample(rng),
+    }
+    samples: dict[str, list[float]] = {k: [] for k in cells}
     for _ in range(args.repeats):
-        for key, cfg in cells.items():
-            samples[key].append(_ms_per_step(dataset, cfg, args.steps))
-    results = {}
-    for key, values in samples.items():
-        step_ms = float(np.median([v[0] for v in values]))
-        sample_ms = float(np.median([v[1] for v in values]))
-        results[f"{key}_ms_per_step"] = round(step_ms, 2)
-        results[f"{key}_samples_per_second"] = round(64 * 1e3 / step_ms, 1)
-        results[f"{key}_sampler_share"] = round(sample_ms / step_ms, 4)
+        for key, make in cells.items():
+            samples[key].append(_time(make(), args.steps))
+    ms = {k: float(np.median(v)) for k, v in samples.items()}
+    results: dict[str, float | None] = {}
+    for key in ("gcdt_fp32", "gcdt_bf16", "huggingface_fp32", "huggingface_bf16", "bc_fp32"):
+        if key in ms:
+            results[f"{key}_ms_per_step"] = round(ms[key], 2)
+            results[f"{key}_samples_per_second"] = round(64e3 / ms[key], 1)
+    for precision in ("fp32", "bf16"):  # median of the paired (same-repeat) ratios
+        ours, theirs = samples[f"gcdt_{precision}"], samples.get(f"huggingface_{precision}")
+        results[f"speedup_vs_huggingface_{precision}"] = (
+            None if theirs is None else round(float(np.median(np.divide(theirs, ours))), 3)
+        )
+    results["dt_sampler_share"] = round(ms["dt_sampler"] / ms["gcdt_fp32"], 4)
+    results["bc_sampler_share"] = round(ms["bc_sampler"] / ms["bc_fp32"], 4)
     report = {
-        "unit": "ms per training step (batch 64), median of repeats",
-        "config": {"batch": 64, "context": 20, "hidden": 128, "layers": 3, "heads": 1},
+        "unit": "ms per training step (batch 64), median of interleaved repeats",
+        "speedup": "median over repeats of huggingface ms / gcdt ms, measured side by side",
+        "config": {
+            "batch": 64,
+            "context": 20,
+            "hidden": 128,
+            "layers": 3,
+            "heads": 1,
+            "dropout": 0.1,
+            "state_dim": dim,
+        },
+        "targets": {"speedup_vs_huggingface_fp32": ">= 1.5", "dt_sampler_share": "<= 0.05"},
+        "huggingface": "transformers " + _version("transformers"),
         "torch_threads": torch.get_num_threads(),
         "results": results,
+        "samples_ms": {k: [round(x, 2) for x in v] for k, v in samples.items()},
     }
     write_report("training_throughput", "training_throughput.py", report)
+
+
+def _version(package: str) -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(package)
+    except PackageNotFoundError:
+        return "not installed"
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""gcdt.models: shapes, causality, left padding, goal conditioning."""
+"""gcdt.models: shapes, causality, left padding, goal conditioning, the fast paths."""
 
 from __future__ import annotations
 
@@ -6,7 +6,14 @@ import pytest
 import torch
 
 from gcdt.errors import GcdtError
-from gcdt.models import BCConfig, BCPolicyNet, DTConfig, GoalConditionedDT, state_columns
+from gcdt.models import (
+    BCConfig,
+    BCPolicyNet,
+    DTConfig,
+    GoalConditionedDT,
+    dropout,
+    state_columns,
+)
 
 
 def _inputs(b=3, k=6, d=24, a=3, seed=0):
@@ -89,3 +96,53 @@ def test_attention_weights_match_the_fast_path(model):
     torch.testing.assert_close(attention[0].sum(-1), torch.ones(3, 1, 18))
     assert attention[0][0, 0, 6:, :6].abs().max() == 0  # real tokens never see padding
     assert torch.triu(attention[1][1, 0], diagonal=1).abs().max() == 0  # causal
+
+
+def test_only_the_requested_state_tokens_are_computed(model):
+    inputs = _inputs()
+    inputs["mask"][1, :3] = False
+    with torch.no_grad():
+        full = model(**inputs, attention=[])  # every token computed
+        pruned = model(**inputs)  # the last block evaluates state tokens only
+        last = model(**inputs, steps=slice(-1, None))
+    torch.testing.assert_close(pruned, full, atol=1e-5, rtol=1e-5)
+    assert last.shape == (3, 1, 3)
+    torch.testing.assert_close(last, full[:, -1:], atol=1e-5, rtol=1e-5)
+
+
+def test_cpu_training_path_equals_sdpa_without_dropout():
+    """Training on CPU spells attention out (for the cheap dropout); with dropout 0 it must
+    give the SDPA path's numbers, gradients included."""
+    torch.manual_seed(0)
+    net = GoalConditionedDT(DTConfig(state_dim=24, action_dim=3, context=6, dropout=0.0))
+    inputs = _inputs()
+    inputs["mask"][0, :2] = False
+    outs, grads = [], []
+    for train in (True, False):
+        net.train(train)
+        net.zero_grad()
+        out = net(**inputs)
+        out.sum().backward()
+        outs.append(out.detach())
+        grads.append(net.blocks[0].qkv.weight.grad.clone())
+    torch.testing.assert_close(outs[0], outs[1], atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(grads[0], grads[1], atol=1e-5, rtol=1e-4)
+
+
+def test_dropout_drops_p_keeps_the_mean_and_follows_torch_seed():
+    x = torch.ones(200, 1000)
+    torch.manual_seed(3)
+    y = dropout(x, 0.1, training=True)
+    assert abs((y == 0).float().mean().item() - 0.1) < 0.003
+    assert abs(y.mean().item() - 1.0) < 0.01
+    values = torch.unique(y).tolist()
+    assert values[0] == 0.0 and values[1:] == [pytest.approx(65536 / (65536 - 6554))]
+    torch.manual_seed(3)
+    assert torch.equal(dropout(x, 0.1, training=True), y)  # reproducible from torch's seed
+    assert not torch.equal(dropout(x, 0.1, training=True), y)  # a fresh mask per call
+    assert dropout(x, 0.1, training=False) is x
+    g = torch.ones(5, requires_grad=True)
+    torch.manual_seed(0)
+    out = dropout(g, 0.5, training=True)
+    out.sum().backward()
+    torch.testing.assert_close(g.grad, out.detach())  # gradient flows through the kept units

@@ -149,6 +149,25 @@ def test_checkpoint_policy_matches_model_and_cli(reach_expert_data, tmp_path, ca
     assert one.summary["episodes"] == 4
 
 
+def test_policy_predicts_what_the_full_model_predicts(make_dataset, tmp_path):
+    """Acting computes only the newest state token and skips padding common to all envs;
+    the actions must equal the full model's on the same context, envs out of step too."""
+    result = train(make_dataset("reach", (12, 9, 12)), TrainConfig(steps=3, context=5, **FAST),
+                   tmp_path, progress=False)  # fmt: skip
+    policy = TrainedPolicy(result.checkpoint)
+    policy.reset(2, 0)
+    rng = np.random.default_rng(0)
+    widths = {"observation": 6, "desired_goal": 3, "achieved_goal": 3}
+    for t in range(9):
+        obs = {k: rng.normal(size=(2, n)).astype(np.float32) for k, n in widths.items()}
+        start = np.array([t == 0, t in (0, 3)])  # env 1 starts a new episode at t = 3
+        action = policy.predict(obs, start, rng.normal(size=2).astype(np.float32))
+        with torch.no_grad():  # a_K, filled in by predict, is invisible to s_K (causal)
+            p = policy
+            full = p.model(p.states, p.actions, p.rtg, p.timesteps, p.mask, attention=[])
+        np.testing.assert_allclose(action, full[:, -1].numpy(), rtol=0, atol=1e-5)
+
+
 def test_cli_train_refuses_other_task(make_dataset, tmp_path, capsys):
     path = make_dataset("push").save(tmp_path / "push.npz")
     code = main(["train", "--dataset", str(path), "--task", "reach", "--out", str(tmp_path / "o"),

@@ -94,7 +94,11 @@ class TrainedPolicy(Policy):
         self.rtg[:, -1, 0] = rtg
         self.timesteps[:, -1] = torch.as_tensor(np.minimum(self.t, self.max_t), device=self.device)
         self.mask[:, -1] = True
-        action = self.model(self.states, self.actions, self.rtg, self.timesteps, self.mask)[:, -1]
+        # Steps that are padding in every env hold nothing a real token may attend to: leave
+        # them out (exact). Early in an episode most of the window is such padding.
+        first = self.k - int(self.mask.sum(dim=1).max())
+        window = (b[:, first:] for b in (self.states, self.actions, self.rtg, self.timesteps))
+        action = self.model(*window, self.mask[:, first:], steps=slice(-1, None))[:, 0]
         self.actions[:, -1] = action
         return action.cpu().numpy().astype(np.float32)
 

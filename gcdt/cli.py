@@ -253,6 +253,11 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     rp.add_argument("--profile", required=True, choices=list(PROFILES))
     rp.add_argument("--readme", action="store_true", help="also update README.md's results")
+    rp.add_argument("--wall-seconds", type=float, metavar="S",
+                    help="record S as the wall time of the `make reproduce` that made these "
+                    "results (results/PROFILE/reproduce.json)")  # fmt: skip
+    rp.add_argument("--backend", default="local", choices=list(BACKENDS),
+                    help="the backend of that `make reproduce` (with --wall-seconds)")  # fmt: skip
     rp.set_defaults(run=_report_cmd)
     return parser
 
@@ -491,10 +496,15 @@ def _sweep(args: argparse.Namespace) -> int:
 def _report_cmd(args: argparse.Namespace) -> int:
     from gcdt.experiments import get_profile
     from gcdt.paths import REPO_ROOT
-    from gcdt.report import update_readme, write_report
+    from gcdt.report import record_reproduction, update_readme, write_report
 
     profile = get_profile(args.profile)
-    for path in write_report(profile):
+    if args.wall_seconds is not None and not args.wall_seconds >= 0:  # before writing anything
+        raise GcdtError(f"--wall-seconds must be >= 0, got {args.wall_seconds}")
+    written = write_report(profile)
+    if args.wall_seconds is not None:
+        written.append(record_reproduction(profile, args.wall_seconds, args.backend))
+    for path in written:
         print(path.relative_to(REPO_ROOT) if path.is_relative_to(REPO_ROOT) else path)
     if args.readme:
         update_readme(profile, REPO_ROOT / "README.md")

@@ -26,6 +26,7 @@ from gcdt.experiments import (
 )
 from gcdt.experiments.grid import RUN_SCHEMA
 from gcdt.experiments.profiles import SMOKE, Scope
+from gcdt.training import load_checkpoint
 
 ONE = Scope(tasks=("reach",), rewards=("sparse",))
 #: Seven real runs on Reach in well under a minute: Table 1 (GC-DT, BC, TQC+HER), one RQ4
@@ -37,6 +38,7 @@ TINY = dataclasses.replace(
     rq4_sizes=(150, 300),
     rq5_ratios=(0.5, 1.0),
     train_steps={"reach": 5},
+    learning_rate=2e-4,
     eval_timesteps=60,
     tqc_steps=120,
     tqc_budget={"learning_starts": 50, "batch_size": 16, "net_arch": [16]},
@@ -54,6 +56,7 @@ def test_paper_profile_is_the_paper_and_others_list_their_deviations():
     quick = deviations_text(get_profile("quick"))
     assert "1 seed per cell instead of 3" in quick
     assert "scripted experts" in quick and "instead of 10,000" in quick
+    assert "learning rate 0.001 instead of 0.0001" in quick
     with pytest.raises(GcdtError, match="unknown profile 'huge'"):
         get_profile("huge")
 
@@ -77,6 +80,7 @@ def test_run_key_is_stable_and_complete():
     assert RunSpec.from_dict(json.loads(json.dumps(spec.to_dict()))).key() == spec.key()
     assert dataclasses.replace(spec, seed=1).key() != spec.key()
     assert dataclasses.replace(spec, eval_timesteps=61).key() != spec.key()
+    assert dataclasses.replace(spec, learning_rate=1e-3).key() != spec.key()
 
 
 def _results(root: Path) -> dict[str, dict]:
@@ -113,6 +117,10 @@ def test_local_sweep_runs_every_run_once(local_sweep):
     # One expert and one random collection, two derived datasets, all content-keyed.
     datasets = list((root / "artifacts" / "grid" / "datasets").glob("*.npz"))
     assert len(datasets) == 4
+    # Every offline run trained at the profile's learning rate, not the trainer's default.
+    checkpoints = list((root / "artifacts" / "grid" / "checkpoints").glob("*/checkpoint.pt"))
+    assert len(checkpoints) == 6
+    assert {load_checkpoint(p)["train_config"]["lr"] for p in checkpoints} == {2e-4}
     again = sweep(TINY, store_root=root / "runs", workers=2, progress=False)
     assert len(again.skipped) == 7 and not again.done and not again.failed
 
@@ -222,7 +230,8 @@ def test_dry_run_lists_runs_with_state_and_cost(capsys):
 
     assert main(["sweep", "--profile", "quick", "--dry-run", "--only", "rq4"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert len(lines) == 5 and lines[-1].startswith("4 runs, ")
+    sizes = get_profile("quick").rq4_sizes
+    assert len(lines) == len(sizes) + 1 and lines[-1].startswith(f"{len(sizes)} runs, ")
     assert all("gcdt push/sparse seed 0" in line and " min " in line for line in lines[:-1])
     costs = CostModel()
     short, long = (dataclasses.replace(build_grid(TINY, only="table1")[0].spec, train_steps=n)

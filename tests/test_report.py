@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
 
+from gcdt import report
+from gcdt.cli import main
 from gcdt.errors import GcdtError
 from gcdt.experiments import RunStore, build_grid
 from gcdt.experiments.grid import RUN_SCHEMA
@@ -25,9 +28,8 @@ def _success(spec) -> float:
     return round(0.5 * size * ratio + 0.1 * spec.seed + (0.2 if spec.method == "gcdt" else 0), 4)
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    store = RunStore(tmp_path_factory.mktemp("runs"))
+def _write_runs(root) -> RunStore:
+    store = RunStore(root)
     for entry in build_grid(PROFILE):
         spec = entry.spec
         store.write(spec.key(), {
@@ -35,7 +37,12 @@ def runs(tmp_path_factory):
             "metrics": {"success_rate": _success(spec), "mean_return": -10 * spec.seed,
                         "episodes": 20},
         })  # fmt: skip
-    return tables.load_runs(PROFILE, store.root)
+    return store
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    return tables.load_runs(PROFILE, _write_runs(tmp_path_factory.mktemp("runs")).root)
 
 
 def test_table1_aggregates_over_seeds_beside_the_paper(runs):
@@ -80,3 +87,54 @@ def test_figures_plot_the_means_over_seeds(runs):
 def test_no_results_say_what_to_run(tmp_path):
     with pytest.raises(GcdtError, match="run `gcdt sweep --profile report-test`"):
         tables.load_runs(PROFILE, tmp_path)
+
+
+def test_directions_set_each_claim_of_the_paper_beside_ours(runs):
+    table = tables.directions(runs).set_index("comparison")
+    # GC-DT is 20 points above BC and TQC+HER in the fixture; the paper has ties on Reach.
+    assert table.loc["GC-DT vs BC, Push sparse"].tolist() == [
+        "higher (+0.4 pts)",
+        "higher (+20.0 pts)",
+        True,
+    ]
+    assert table.loc["GC-DT vs BC, Reach sparse"].tolist() == [
+        "equal (+0.0 pts)",
+        "higher (+20.0 pts)",
+        False,
+    ]
+    assert table.loc["GC-DT vs TQC+HER, Push sparse", "paper"] == "lower (-4.5 pts)"
+    rq4 = "RQ4, {} sparse: less success on the smallest subset than on all data"
+    assert table.loc[rq4.format("Reach")].tolist() == [
+        "no (invariant)",
+        "yes (smallest 55.0 % vs all 80.0 %)",
+        False,
+    ]
+    assert table.loc[rq4.format("Push"), "agrees"]
+    assert table.loc["RQ5, Push sparse: less success at 0 % expert than at 100 %", "agrees"]
+    assert "| GC-DT vs BC, Reach sparse | equal (+0.0 pts) | higher (+20.0 pts) | **no** |" in (
+        tables.directions_markdown(runs)
+    )
+
+
+def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
+    monkeypatch.setattr("gcdt.experiments.store.REPO_ROOT", tmp_path)
+    monkeypatch.setattr("gcdt.report.figures.REPO_ROOT", tmp_path)
+    _write_runs(tmp_path / "results" / PROFILE.name / "runs")
+    monkeypatch.setitem(report.PROFILES, PROFILE.name, PROFILE)
+    assert "No wall time recorded" in report.readme_block(PROFILE)
+    with pytest.raises(GcdtError, match="wall time must be >= 0"):
+        report.record_reproduction(PROFILE, -1, "local")
+    path = report.record_reproduction(PROFILE, 5430.04, "local")
+    record = json.loads(path.read_text())
+    assert record["command"] == "make reproduce PROFILE=report-test BACKEND=local"
+    assert record["wall_seconds"] == 5430.0 and record["runs"] == len(build_grid(PROFILE))
+    report.write_report(PROFILE)
+    block = report.readme_block(PROFILE)
+    assert "**90 min**" in block and "| GC-DT vs BC, Push sparse |" in block
+    assert "![Fig. 3: success rate vs dataset size (RQ4)](figures/report-test/" in block
+    assert "**Goal-conditioning ablation**" in block and "deviates from the paper" in block
+
+
+def test_report_cli_rejects_a_negative_wall_time(capsys):
+    assert main(["report", "--profile", "smoke", "--wall-seconds", "-5"]) != 0
+    assert "--wall-seconds must be >= 0, got -5.0" in capsys.readouterr().err

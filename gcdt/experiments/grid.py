@@ -17,7 +17,7 @@ from typing import Any
 from gcdt.experiments.profiles import Profile
 
 #: Bump when the meaning of a spec field or of a result file changes: old results re-run.
-RUN_SCHEMA = 1
+RUN_SCHEMA = 2
 SECTIONS = ("table1", "rq4", "rq5", "ablation")
 #: Method name -> (trainer method, goal conditioning); `tqc` is the online baseline.
 OFFLINE_METHODS = {
@@ -99,6 +99,7 @@ class RunSpec:
     seed: int
     data: DataSpec | None  # None for the online TQC+HER baseline
     train_steps: int | None  # offline gradient steps; None: the authors' 120 epochs
+    learning_rate: float | None  # offline training's peak learning rate; None for `tqc`
     tqc: TQCSpec | None
     eval_timesteps: int
     eval_seeds: tuple[int, ...]
@@ -172,9 +173,11 @@ def run_spec(profile: Profile, method: str, task: str, reward: str, seed: int,
                       profile.tqc_eval_every, profile.tqc_eval_episodes)  # fmt: skip
     train_steps = None if method == "tqc" or profile.train_steps is None else (
         profile.train_steps[task])  # fmt: skip
+    learning_rate = None if method == "tqc" else profile.learning_rate
     eval_seeds = tuple(seed + 100 * i for i in range(profile.eval_seeds))
-    return RunSpec(method, task, reward, seed, data, train_steps, tqc, profile.eval_timesteps,
-                   eval_seeds, profile.eval_envs, profile.cpus_per_run)  # fmt: skip
+    return RunSpec(method, task, reward, seed, data, train_steps, learning_rate, tqc,
+                   profile.eval_timesteps, eval_seeds, profile.eval_envs,
+                   profile.cpus_per_run)  # fmt: skip
 
 
 def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:

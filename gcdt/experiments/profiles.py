@@ -45,6 +45,8 @@ class Profile:
     # Offline training (GC-DT, DT ablations, BC): gradient steps per task, or None for the
     # authors' 120 epochs of ceil(#episodes / 64) steps.
     train_steps: dict[str, int] | None = None
+    # AdamW peak learning rate of offline training (the authors' 1e-4).
+    learning_rate: float = 1e-4
     # Evaluation of every trained agent: env steps per evaluation seed (the paper's 10,000).
     eval_timesteps: int = 10_000
     eval_seeds: int = 1  # evaluations per run, seeded run_seed, run_seed + 100, ...
@@ -84,9 +86,13 @@ QUICK = dataclasses.replace(
     seeds=(0,),
     expert="scripted",
     dataset_size=20_000,
-    rq4_sizes=(2_500, 5_000, 10_000, 20_000),
+    rq4_sizes=(5_000, 10_000, 20_000),
     rq5_ratios=(0.0, 0.25, 0.5, 0.75, 1.0),
-    train_steps={"reach": 400, "push": 1000, "pick_and_place": 1500},
+    # A few thousand steps at 10x the authors' learning rate: on 20k scripted transitions
+    # GC-DT at lr 1e-3 reaches on Push 87 % after 1,000 steps and 98 % after 3,000, where lr
+    # 1e-4 needs 5,000 steps for 96 % (2 cores, 1 thread, ~0.3 s per step).
+    train_steps={"reach": 400, "push": 2500, "pick_and_place": 4500},
+    learning_rate=1e-3,
     eval_timesteps=2_000,
     eval_envs=1,
     tqc_config="cpu",
@@ -97,7 +103,7 @@ QUICK = dataclasses.replace(
     table1_tqc=Scope(tasks=("reach",)),
     rq4=Scope(tasks=("push",), rewards=("sparse",)),
     rq5=Scope(tasks=("push",), rewards=("sparse",)),
-    ablation=Scope(tasks=("reach", "push"), rewards=("sparse",)),
+    ablation=Scope(tasks=("reach",), rewards=("sparse",)),
 )
 
 SMOKE = dataclasses.replace(
@@ -157,6 +163,11 @@ def deviations(profile: Profile) -> list[str]:
         steps = ", ".join(f"{t} {n:,}" for t, n in (p.train_steps or {}).items())
         out.append(
             f"offline training for a fixed number of gradient steps ({steps}) instead of 120 epochs"
+        )
+    if p.learning_rate != paper.learning_rate:
+        out.append(
+            f"offline training at learning rate {p.learning_rate:g} instead of "
+            f"{paper.learning_rate:g}, to fit the shorter budget"
         )
     if p.eval_timesteps != paper.eval_timesteps:
         out.append(

@@ -92,7 +92,7 @@ def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict
     timings["data_seconds"] = round(time.perf_counter() - began, 3)
     method, conditioning = OFFLINE_METHODS[spec.method]
     cfg = TrainConfig(method=method, goal_conditioning=conditioning, reward=spec.reward,
-                      steps=spec.train_steps, seed=spec.seed)  # fmt: skip
+                      steps=spec.train_steps, lr=spec.learning_rate, seed=spec.seed)  # fmt: skip
     out = artifacts.checkpoint_dir(spec)
     ckpt_path = out / "checkpoint.pt"
     began = time.perf_counter()

@@ -163,3 +163,66 @@ def to_latex(table: pd.DataFrame, caption: str, label: str) -> str:
                        + " & ".join(cells.get(t, "--") for t in tasks) + r" \\")  # fmt: skip
     out += [r"\bottomrule", r"\end{tabular}", r"\end{table*}"]
     return "\n".join(out) + "\n"
+
+
+def _paper_trend(section: str, task: str) -> tuple[bool, str]:
+    """(holds in the paper, claim) for RQ4 / RQ5, from Section V and Fig. 3-4: success on the
+    smallest subset is below the full data's for Push and PickAndPlace and "invariant to size"
+    for Reach; it falls with the expert share and "drops sharply" at 0 %."""
+    if section == "rq4":
+        return task != "reach", "less success on the smallest subset than on all data"
+    return True, "less success at 0 % expert than at 100 %"
+
+
+def _sign(diff: float) -> str:
+    return "higher" if diff > 0 else "lower" if diff < 0 else "equal"
+
+
+def directions(runs: pd.DataFrame) -> pd.DataFrame:
+    """Every comparison the paper's results make, with the paper's answer and ours.
+
+    Table 1: GC-DT against BC and TQC+HER, per task and reward (success rate, points).
+    RQ4 / RQ5: whether GC-DT's success is lower at the smallest subset than on all the data,
+    and at 0 % expert than at 100 %. `agrees` is whether both point the same way; with one
+    seed and a short evaluation, a difference of one episode is several points.
+    """
+    rows = []
+    table = table1(runs).set_index(["reward", "method", "task"])
+    for (reward, method, task), row in table.iterrows():
+        if method == "gcdt" or (reward, "gcdt", task) not in table.index:
+            continue
+        ours = table.loc[(reward, "gcdt", task)]
+        paper = ours["paper_success"] - row["paper_success"]
+        diff = ours["success_mean"] - row["success_mean"]
+        rows.append({
+            "comparison": f"GC-DT vs {METHOD_NAMES[method]}, {TASK_NAMES[task]} {reward}",
+            "paper": f"{_sign(paper)} ({paper:+.1f} pts)",
+            "ours": f"{_sign(diff)} ({diff:+.1f} pts)", "agrees": _sign(paper) == _sign(diff),
+        })  # fmt: skip
+    for section, x, low_label, high_label in (("rq4", "size", "smallest", "all"),
+                                              ("rq5", "expert_ratio", "0 %", "100 %")):  # fmt: skip
+        sel = runs[runs["sections"].apply(lambda s, sec=section: sec in s)
+                   & (runs["method"] == "gcdt")]  # fmt: skip
+        for (task, reward), cell in sel.groupby(["task", "reward"], sort=False):
+            means = 100 * cell.groupby(x)["success_rate"].mean().sort_index()
+            if section == "rq5" and not {0.0, 1.0} <= set(means.index):
+                continue
+            diff = means.iloc[0] - means.iloc[-1]
+            lower, claim = _paper_trend(section, task)
+            ours_lower = diff < 0
+            rows.append({
+                "comparison": f"{section.upper()}, {TASK_NAMES[task]} {reward}: {claim}",
+                "paper": "yes" if lower else "no (invariant)",
+                "ours": f"{'yes' if ours_lower else 'no'} ({low_label} {means.iloc[0]:.1f} % vs "
+                        f"{high_label} {means.iloc[-1]:.1f} %)",
+                "agrees": lower == ours_lower,
+            })  # fmt: skip
+    return pd.DataFrame(rows, columns=["comparison", "paper", "ours", "agrees"])
+
+
+def directions_markdown(runs: pd.DataFrame) -> str:
+    table = directions(runs)
+    lines = ["| comparison | paper | ours | same direction |", "|---|---|---|---|"]
+    lines += [f"| {r.comparison} | {r.paper} | {r.ours} | {'yes' if r.agrees else '**no**'} |"
+              for r in table.itertuples()]  # fmt: skip
+    return "\n".join(lines)

@@ -19,7 +19,7 @@ from gcdt.experiments.grid import SECTIONS
 from gcdt.experiments.profiles import PROFILES
 from gcdt.experiments.sweep import BACKENDS
 from gcdt.paths import write_json_atomic
-from gcdt.policies import POLICY_SPECS
+from gcdt.policies import POLICY_NAMES, POLICY_SPECS, TQC_PREFIX
 
 USAGE_ERROR = 2
 POLICY_HELP = (
@@ -97,6 +97,9 @@ def _build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
     ev.add_argument("--seed", type=_int_at_least(0), default=0)
     ev.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
+    ev.add_argument("--target-return", type=float, metavar="R",
+                    help="a DT checkpoint's target return at each episode's start (default 0, "
+                    "the paper's)")  # fmt: skip
     ev.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     ev.add_argument(
         "--out",
@@ -192,6 +195,7 @@ def _build_parser() -> argparse.ArgumentParser:
         "--epochs", type=_positive_int, help="authors' epochs (default 120), ceil(episodes/batch)"
     )
     tr.add_argument("--batch-size", type=_positive_int, default=64)
+    tr.add_argument("--lr", type=float, default=1e-4, help="AdamW peak learning rate")
     tr.add_argument("--context", type=_positive_int, default=20, metavar="K")
     tr.add_argument("--seed", type=_int_at_least(0), default=0)
     tr.add_argument("--device", default="auto", help="auto (CUDA when present), cpu, cuda")
@@ -266,7 +270,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     from gcdt.evaluation import evaluate
     from gcdt.policies import make_policy
 
-    policy = make_policy(args.policy, args.task, **_scripted_kwargs(args))
+    policy = make_policy(args.policy, args.task, **_policy_kwargs(args))
     result = evaluate(
         policy,
         args.task,
@@ -301,9 +305,14 @@ def _command(args: argparse.Namespace) -> str:
     return " ".join(["gcdt", *args.argv])
 
 
-def _scripted_kwargs(args: argparse.Namespace) -> dict:
+def _policy_kwargs(args: argparse.Namespace) -> dict:
     if args.noise and args.policy != "scripted":
         raise GcdtError("--noise applies only to --policy scripted")
+    target = getattr(args, "target_return", None)
+    if target is not None:
+        if args.policy in POLICY_NAMES or args.policy.startswith(TQC_PREFIX):
+            raise GcdtError("--target-return applies only to a DT checkpoint (gcdt train)")
+        return {"target_return": target}
     return {"noise_std": args.noise} if args.policy == "scripted" else {}
 
 
@@ -328,7 +337,7 @@ def _collect(args: argparse.Namespace) -> int:
     from gcdt.data import collect
     from gcdt.policies import make_policy
 
-    policy = make_policy(args.policy, args.task, **_scripted_kwargs(args))
+    policy = make_policy(args.policy, args.task, **_policy_kwargs(args))
     dataset = collect(
         policy,
         args.task,
@@ -414,6 +423,7 @@ def _train(args: argparse.Namespace) -> int:
         steps=args.steps,
         epochs=args.epochs,
         batch_size=args.batch_size,
+        lr=args.lr,
         context=args.context,
         seed=args.seed,
         device=args.device,

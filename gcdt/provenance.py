@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import datetime as dt
+import platform
 import subprocess
 from importlib import metadata
+from pathlib import Path
 
 from gcdt.paths import REPO_ROOT
 
@@ -46,3 +48,14 @@ def git_commit() -> str | None:
     except (OSError, subprocess.CalledProcessError):
         return None
     return f"{head}+dirty" if dirty else head
+
+
+def cpu_model() -> str:
+    """The CPU's model name (Linux), else what `platform` knows."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()

@@ -78,6 +78,8 @@ class TrainConfig:
             value = getattr(self, name)
             if value is not None and (not isinstance(value, int) or value < 1):
                 raise GcdtError(f"{name} must be a positive integer, got {value!r}")
+        if not self.lr > 0:
+            raise GcdtError(f"lr must be > 0, got {self.lr!r}")
 
     def total_steps(self, n_episodes: int) -> int:
         if self.steps is not None:

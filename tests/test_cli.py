@@ -74,6 +74,10 @@ def test_evaluate_json_last_line(capsys):
             "not allowed with argument",
         ),
         (
+            [*RANDOM_REACH, "--target-return", "-5"],
+            "--target-return applies only to a DT checkpoint (gcdt train)",
+        ),
+        (
             ["--policy", "/no/such/model.pt", "--task", "reach", "--reward", "sparse"],
             "unknown policy '/no/such/model.pt': expected random, scripted, tqc:PATH of a "
             "TQC+HER zip, or the path of an existing checkpoint file",

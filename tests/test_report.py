@@ -91,11 +91,12 @@ def test_no_results_say_what_to_run(tmp_path):
 
 def test_directions_set_each_claim_of_the_paper_beside_ours(runs):
     table = tables.directions(runs).set_index("comparison")
-    # GC-DT is 20 points above BC and TQC+HER in the fixture; the paper has ties on Reach.
+    # GC-DT is 20 points above BC and TQC+HER in the fixture; in the paper it is level with
+    # BC (within a point) on Reach and Push.
     assert table.loc["GC-DT vs BC, Push sparse"].tolist() == [
-        "higher (+0.4 pts)",
+        "equal (+0.4 pts)",
         "higher (+20.0 pts)",
-        True,
+        False,
     ]
     assert table.loc["GC-DT vs BC, Reach sparse"].tolist() == [
         "equal (+0.0 pts)",

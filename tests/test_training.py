@@ -104,6 +104,10 @@ def test_bad_checkpoints_and_configs(make_dataset, tmp_path):
         TrainConfig(steps=10, context=0)
     with pytest.raises(GcdtError, match="unknown method 'cql'"):
         TrainConfig(method="cql", steps=1)
+    with pytest.raises(GcdtError, match=r"lr must be > 0, got 0\.0"):
+        TrainConfig(steps=1, lr=0.0)
+    with pytest.raises(GcdtError, match="is BC, which takes no target return"):
+        make_policy(str(result.checkpoint), "reach", target_return=-5.0)
     # The authors' epochs: ceil(#episodes / batch) steps each.
     assert TrainConfig(epochs=3, batch_size=64).total_steps(130) == 9
 

@@ -1,7 +1,7 @@
 """Scale profiles: every number that sets the size of the experiment grid, in one place.
 
 `paper` is the paper's protocol; `quick` a real, reduced reproduction for a 2-core CPU
-(about 90 minutes); `smoke` runs every stage in minutes and its numbers mean nothing.
+(about an hour); `smoke` runs every stage in minutes and its numbers mean nothing.
 `deviations(profile)` is the one text that lists how a profile differs from the paper; the
 README and the reports print it rather than restating it.
 """
@@ -82,7 +82,7 @@ PAPER = Profile(
 QUICK = dataclasses.replace(
     PAPER,
     name="quick",
-    description="a real, reduced reproduction on a 2-core CPU in about 90 minutes",
+    description="a real, reduced reproduction on a 2-core CPU in about an hour",
     seeds=(0,),
     expert="scripted",
     dataset_size=20_000,

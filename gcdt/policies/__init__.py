@@ -35,14 +35,14 @@ def make_policy(policy: str, task: str, **kwargs) -> Policy:
             f"unknown policy {policy!r}: expected {', '.join(POLICY_NAMES)}, "
             f"{TQC_PREFIX}PATH of a TQC+HER zip, or the path of an existing checkpoint file"
         )
-    return load_checkpoint_policy(path, task)
+    return load_checkpoint_policy(path, task, **kwargs)
 
 
-def load_checkpoint_policy(path: Path, task: str) -> Policy:
+def load_checkpoint_policy(path: Path, task: str, **kwargs) -> Policy:
     """A trained GC-DT / DT / BC checkpoint (`gcdt train`) as a policy for `task`."""
     from gcdt.policies.trained import TrainedPolicy  # imports torch: only when needed
 
-    return TrainedPolicy(path, task)
+    return TrainedPolicy(path, task, **kwargs)
 
 
 __all__ = [

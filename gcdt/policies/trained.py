@@ -40,6 +40,8 @@ class TrainedPolicy(Policy):
         super().__init__(ckpt["task"])
         cfg = ckpt["train_config"]
         self.method = ckpt["method"]
+        if self.method == "bc" and target_return != 0.0:
+            raise GcdtError(f"checkpoint {self.path} is BC, which takes no target return")
         self.name = method_label(self.method, cfg["goal_conditioning"])
         self.cols = state_columns(self.task, cfg["goal_conditioning"])
         self.scale = float(cfg["return_scale"])

@@ -16,6 +16,7 @@ from pathlib import Path
 from gcdt.errors import GcdtError
 from gcdt.experiments.profiles import PROFILES, Profile, deviations_text
 from gcdt.experiments.store import results_dir
+from gcdt.paths import write_json_atomic
 from gcdt.report import figures, tables
 
 README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
@@ -85,7 +86,7 @@ def write_report(profile: Profile) -> list[Path]:
 
 def record_reproduction(profile: Profile, wall_seconds: float, backend: str) -> Path:
     """Write results/<profile>/reproduce.json: how long `make reproduce` took, and where."""
-    from gcdt.provenance import git_commit, package_versions, utc_now
+    from gcdt.provenance import cpu_model, git_commit, package_versions, utc_now
 
     if not wall_seconds >= 0:
         raise GcdtError(f"wall time must be >= 0 seconds, got {wall_seconds}")
@@ -97,27 +98,15 @@ def record_reproduction(profile: Profile, wall_seconds: float, backend: str) -> 
         "git_commit": git_commit(),
         "runs": len(runs),
         "machine": {
-            "cpu": _cpu_model(),
+            "cpu": cpu_model(),
             "cores": os.cpu_count(),
             "python": platform.python_version(),
             "torch": package_versions(("torch",))["torch"],
         },
     }
     path = results_dir(profile.name) / "reproduce.json"
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(record, indent=2) + "\n")
-    tmp.replace(path)  # atomic: never a half-written record
+    write_json_atomic(path, record)
     return path
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def _wall_time_text(profile: Profile) -> str:
@@ -147,7 +136,8 @@ def readme_block(profile: Profile) -> str:
         f"**Table 1** as reproduced by the `{name}` profile (return / success rate in %, "
         "mean ± std over seeds; the paper's values in parentheses):",
         tables.to_markdown(tables.table1(runs)),
-        "**Direction checks**: each comparison the paper's results make, with ours:",
+        "**Direction checks**: each comparison the paper's results make, with ours (success "
+        f"rates; differences under {tables.EQUAL_POINTS:g} point count as equal):",
         tables.directions_markdown(runs),
     ]
     ablation = tables.ablation_table(runs)

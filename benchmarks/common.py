@@ -16,6 +16,7 @@ import numpy as np
 from gcdt.envs import episode_seed, make_env, make_vec_env
 from gcdt.paths import REPO_ROOT, write_json_atomic
 from gcdt.policies import Policy
+from gcdt.provenance import cpu_model
 
 BENCH_DIR = REPO_ROOT / "results" / "bench"
 
@@ -24,7 +25,7 @@ def machine_info() -> dict[str, Any]:
     import torch
 
     return {
-        "cpu": platform.processor() or platform.machine(),
+        "cpu": cpu_model(),
         "cores": os.cpu_count(),
         "python": platform.python_version(),
         "torch": torch.__version__,

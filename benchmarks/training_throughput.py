@@ -1,6 +1,6 @@
 """DT training throughput: gcdt's trainer step vs the authors' HuggingFace path, and BC's.
 
-    python benchmarks/training_throughput.py [--steps 10] [--repeats 3]
+    python benchmarks/training_throughput.py [--steps 10] [--repeats 3] [--bf16-steps 2]
 
 Writes results/bench/training_throughput.json. One full training step (forward, masked MSE,
 backward, clip 0.25, AdamW) of the paper's config (batch 64, K 20, hidden 128, 3 layers,
@@ -57,9 +57,9 @@ def _dataset(episodes: int = 1000, length: int = 50):
     return from_episodes("pick_and_place", eps, {"source": "benchmark"})
 
 
-def _time(step: Callable[[int], object], steps: int) -> float:
-    """ms per call of `step(i)` after a warm-up of 3 calls."""
-    for i in range(3):
+def _time(step: Callable[[int], object], steps: int, warmup: int = 3) -> float:
+    """ms per call of `step(i)` after `warmup` calls."""
+    for i in range(warmup):
         step(i)
     began = time.perf_counter()
     for i in range(steps):
@@ -117,6 +117,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=10)
     parser.add_argument("--repeats", type=int, default=3)
+    # A CPU without native bfloat16 (AVX512-BF16 / AMX) emulates it ~15x slower than fp32.
+    parser.add_argument("--bf16-steps", type=int, default=2)
     args = parser.parse_args()
     dataset = _dataset()
     dim = dataset.spec.state_dim
@@ -146,7 +148,9 @@ def main() -> None:
     samples: dict[str, list[float]] = {k: [] for k in cells}
     for _ in range(args.repeats):
         for key, make in cells.items():
-            samples[key].append(_time(make(), args.steps))
+            bf16 = key.endswith("bf16")
+            steps, warmup = (args.bf16_steps, 1) if bf16 else (args.steps, 3)
+            samples[key].append(_time(make(), steps, warmup))
     ms = {k: float(np.median(v)) for k, v in samples.items()}
     results: dict[str, float | None] = {}
     for key in ("gcdt_fp32", "gcdt_bf16", "huggingface_fp32", "huggingface_bf16", "bc_fp32"):

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -16,21 +14,9 @@ import numpy as np
 from gcdt.envs import episode_seed, make_env, make_vec_env
 from gcdt.paths import REPO_ROOT, write_json_atomic
 from gcdt.policies import Policy
-from gcdt.provenance import cpu_model
+from gcdt.provenance import machine_info
 
 BENCH_DIR = REPO_ROOT / "results" / "bench"
-
-
-def machine_info() -> dict[str, Any]:
-    import torch
-
-    return {
-        "cpu": cpu_model(),
-        "cores": os.cpu_count(),
-        "python": platform.python_version(),
-        "torch": torch.__version__,
-        "device": "cuda" if torch.cuda.is_available() else "cpu",
-    }
 
 
 def write_report(name: str, script: str, report: dict[str, Any]) -> Path:

@@ -105,14 +105,6 @@ def _huggingface(bf16: bool, dim: int, batches: list[dict[str, torch.Tensor]]):
     return step
 
 
-def _has_transformers() -> bool:
-    try:
-        import transformers  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=10)
@@ -134,7 +126,7 @@ def main() -> None:
         for method in ("dt", "bc")
     }
     batches = {m: [s.sample(rng) for _ in range(8)] for m, s in samplers.items()}
-    hf = _has_transformers()
+    hf = _version("transformers") != "not installed"
     # Each gcdt cell right beside its HF twin: this VM's speed drifts within minutes.
     cells: dict[str, Callable[[], Callable[[int], object]]] = {
         "gcdt_fp32": lambda: _gcdt(TrainConfig(), dim, batches["dt"]),

@@ -9,8 +9,6 @@ results/<profile>/report.md, which also lists the profile's deviations from the 
 from __future__ import annotations
 
 import json
-import os
-import platform
 from pathlib import Path
 
 from gcdt.errors import GcdtError
@@ -86,7 +84,7 @@ def write_report(profile: Profile) -> list[Path]:
 
 def record_reproduction(profile: Profile, wall_seconds: float, backend: str) -> Path:
     """Write results/<profile>/reproduce.json: how long `make reproduce` took, and where."""
-    from gcdt.provenance import cpu_model, git_commit, package_versions, utc_now
+    from gcdt.provenance import git_commit, machine_info, utc_now
 
     if not wall_seconds >= 0:
         raise GcdtError(f"wall time must be >= 0 seconds, got {wall_seconds}")
@@ -97,12 +95,7 @@ def record_reproduction(profile: Profile, wall_seconds: float, backend: str) -> 
         "finished": utc_now(),
         "git_commit": git_commit(),
         "runs": len(runs),
-        "machine": {
-            "cpu": cpu_model(),
-            "cores": os.cpu_count(),
-            "python": platform.python_version(),
-            "torch": package_versions(("torch",))["torch"],
-        },
+        "machine": machine_info(),
     }
     path = results_dir(profile.name) / "reproduce.json"
     write_json_atomic(path, record)

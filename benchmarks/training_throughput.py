@@ -31,7 +31,14 @@ from common import write_report
 from gcdt.data import from_episodes
 from gcdt.envs import compute_rewards
 from gcdt.models import BCConfig, DTConfig
-from gcdt.training import TrainConfig, WindowSampler, build_model, make_optimizer, train_step
+from gcdt.training import (
+    TrainConfig,
+    WindowSampler,
+    build_model,
+    keep_freed_memory,
+    make_optimizer,
+    train_step,
+)
 
 CPU = torch.device("cpu")
 
@@ -112,6 +119,8 @@ def main() -> None:
     # A CPU without native bfloat16 (AVX512-BF16 / AMX) emulates it ~15x slower than fp32.
     parser.add_argument("--bf16-steps", type=int, default=2)
     args = parser.parse_args()
+    # As `gcdt train` on CPU. Process-wide, so the HuggingFace cells run under it too.
+    keep_freed_memory()
     dataset = _dataset()
     dim = dataset.spec.state_dim
     rng = np.random.default_rng(0)

@@ -14,8 +14,11 @@ on CPU a resumed run ends with the same weights as an uninterrupted one.
 from __future__ import annotations
 
 import csv
+import ctypes
+import functools
 import math
 import os
+import platform
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
@@ -159,6 +162,27 @@ def _loss(model: torch.nn.Module, batch: dict[str, torch.Tensor], method: str) -
     return torch.mean((pred - batch["actions"])[batch["mask"]] ** 2)  # real tokens only
 
 
+@functools.cache
+def keep_freed_memory() -> bool:
+    """Let glibc's malloc keep freed memory for reuse instead of handing it back to the OS.
+
+    A CPU training step allocates and frees tensors of several MB. By default glibc maps each
+    one afresh and unmaps it when freed, so every step pays page faults on first touch: on a
+    2-core EPYC a quarter of the DT step (torch profiler, ReLU forward and backward on
+    [64, 60, 512] took 3x longer). Raising the mmap and trim thresholds keeps those blocks
+    in the heap. Process-wide and idempotent; returns False where libc is not glibc.
+    """
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return False
+    libc = ctypes.CDLL(None)
+    m_trim_threshold, m_top_pad, m_mmap_threshold = -1, -2, -3  # <malloc.h>
+    return all((
+        libc.mallopt(m_mmap_threshold, 32 << 20),  # glibc's maximum on 64-bit
+        libc.mallopt(m_trim_threshold, 1 << 30),
+        libc.mallopt(m_top_pad, 64 << 20),
+    ))  # fmt: skip
+
+
 def make_optimizer(model: torch.nn.Module, cfg: TrainConfig) -> torch.optim.Optimizer:
     """The authors' AdamW; fused (one kernel for all parameters, same update rule), which
     on CPU cuts the optimiser's share of a DT step from 4 % to 1 %."""
@@ -220,6 +244,8 @@ def train(
             f"{out_dir} already holds a checkpoint: resume it (--resume) or choose another --out"
         )
     device = resolve_device(cfg.device)
+    if device.type == "cpu":
+        keep_freed_memory()
     cols = state_columns(dataset.task, cfg.goal_conditioning)
     total = cfg.total_steps(dataset.n_episodes)
     state_dim, action_dim = cols.stop, dataset.spec.action_dim

@@ -55,7 +55,10 @@ def test_paper_profile_is_the_paper_and_others_list_their_deviations():
     assert deviations(PROFILES["paper"]) == []
     quick = deviations_text(get_profile("quick"))
     assert "1 seed per cell instead of 3" in quick
-    assert "scripted experts" in quick and "instead of 10,000" in quick
+    assert "scripted experts" in quick and "instead of 1,000,000" in quick
+    assert "env steps" not in quick  # the paper's 10,000-step evaluation
+    smoke = deviations_text(get_profile("smoke"))
+    assert "evaluation over 100 env steps instead of 10,000" in smoke
     assert "learning rate 0.001 instead of 0.0001" in quick
     with pytest.raises(GcdtError, match="unknown profile 'huge'"):
         get_profile("huge")

@@ -71,26 +71,40 @@ class DTConfig:
             raise GcdtError(f"hidden {self.hidden} is not divisible by heads {self.heads}")
 
 
-def dropout(x: torch.Tensor, p: float, training: bool) -> torch.Tensor:
-    """`F.dropout`, with a cheaper mask on CPU.
+def _cpu_keep_scale(x: torch.Tensor, p: float) -> torch.Tensor:
+    """Dropout's mask for `x` on CPU, already scaled: 0 where dropped, 1 / (1 - p) elsewhere.
 
     PyTorch's CPU Bernoulli draws one Mersenne-Twister number per element (~14 ns); in
-    training the paper's DT spent a quarter of each step there. On CPU the mask comes from
+    training the paper's DT spent a quarter of each step there. Here the mask comes from
     16 random bits per element drawn by NumPy's SFC64, seeded from torch's generator, so
     `torch.manual_seed` and saved RNG states still make runs reproducible. The drop
     probability is `p` rounded to a multiple of 2^-16 (0.1 -> 0.100006).
     """
-    if not training or p == 0.0:
-        return x
-    if x.device.type != "cpu":
-        return F.dropout(x, p, training=True)
     threshold = round(p * 65536)
     seed = int(torch.randint(0, 2**62, (1,)))
     bits = np.random.Generator(np.random.SFC64(seed)).bytes(2 * x.numel())
     keep = np.frombuffer(bits, np.uint16).reshape(x.shape) >= threshold
     scale = keep.astype(np.float32)
     scale *= np.float32(65536 / (65536 - threshold))
-    return x * torch.from_numpy(scale).to(x.dtype)
+    return torch.from_numpy(scale).to(x.dtype)
+
+
+def dropout(x: torch.Tensor, p: float, training: bool) -> torch.Tensor:
+    """`F.dropout`, with a cheaper mask on CPU (`_cpu_keep_scale`)."""
+    if not training or p == 0.0:
+        return x
+    if x.device.type != "cpu":
+        return F.dropout(x, p, training=True)
+    return x * _cpu_keep_scale(x, p)
+
+
+def add_dropout(x: torch.Tensor, y: torch.Tensor, p: float, training: bool) -> torch.Tensor:
+    """`x + dropout(y)`, the residual update, where `y` is a fresh activation that may be
+    overwritten: on CPU the mask is applied in place, which saves an allocation of the
+    activation's size and computes the very same numbers."""
+    if training and p > 0.0 and y.device.type == "cpu":
+        return x + y.mul_(_cpu_keep_scale(y, p))
+    return x + dropout(y, p, training)
 
 
 class Dropout(nn.Module):
@@ -116,7 +130,6 @@ class _Block(nn.Module):
         self.ln_2 = nn.LayerNorm(cfg.hidden)
         self.fc = nn.Linear(cfg.hidden, 4 * cfg.hidden)
         self.fc_proj = nn.Linear(4 * cfg.hidden, cfg.hidden)
-        self.resid_drop = Dropout(cfg.dropout)
 
     def forward(
         self,
@@ -149,8 +162,11 @@ class _Block(nn.Module):
             if attention is not None:
                 attention.append(weights.detach())  # [batch, heads, queries, 3K]
             y = dropout(weights, self.dropout, self.training) @ v
-        x = x + self.resid_drop(self.proj(y.transpose(1, 2).reshape(b, -1, h)))
-        return x + self.resid_drop(self.fc_proj(F.relu(self.fc(self.ln_2(x)))))
+        drop, training = self.dropout, self.training
+        x = add_dropout(x, self.proj(y.transpose(1, 2).reshape(b, -1, h)), drop, training)
+        # In place: the MLP's widest activation [batch, 3K, 4 hidden] is not written twice.
+        hidden = F.relu(self.fc(self.ln_2(x)), inplace=True)
+        return add_dropout(x, self.fc_proj(hidden), drop, training)
 
 
 class GoalConditionedDT(nn.Module):

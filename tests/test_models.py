@@ -11,6 +11,7 @@ from gcdt.models import (
     BCPolicyNet,
     DTConfig,
     GoalConditionedDT,
+    add_dropout,
     dropout,
     state_columns,
 )
@@ -146,3 +147,17 @@ def test_dropout_drops_p_keeps_the_mean_and_follows_torch_seed():
     out = dropout(g, 0.5, training=True)
     out.sum().backward()
     torch.testing.assert_close(g.grad, out.detach())  # gradient flows through the kept units
+
+
+def test_in_place_residual_dropout_computes_the_same_numbers_and_gradients():
+    x0, y0 = torch.randn(4, 30, 16), torch.randn(4, 30, 16)
+    results = []
+    for fused in (False, True):
+        x, y = x0.clone().requires_grad_(), y0.clone().requires_grad_()
+        torch.manual_seed(7)
+        out = add_dropout(x, y * 1.0, 0.1, True) if fused else x + dropout(y * 1.0, 0.1, True)
+        (out * torch.arange(16.0)).sum().backward()
+        results.append((out.detach(), x.grad, y.grad))
+    for plain, fused in zip(*results, strict=True):
+        assert torch.equal(plain, fused)  # bit for bit: results do not depend on the fast path
+    assert torch.equal(add_dropout(x0, y0.clone(), 0.1, training=False), x0 + y0)

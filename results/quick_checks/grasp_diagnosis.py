@@ -1,0 +1,75 @@
+"""Why GC-DT misses on PickAndPlace with sparse rewards: where does it close the gripper?
+
+    python results/quick_checks/grasp_diagnosis.py CHECKPOINT --target-return R --episodes N --out F.json
+
+Runs whole episodes (reset seeds `episode_seed(5000, j)`) and counts, per episode, the steps
+on which the policy commands the gripper shut (action[3] < 0) while the fingertips are more
+than 3 cm from the cube, and whether the cube was ever held (within 2 cm, fingers closed on
+it) before the episode ended. Used by results/quick_checks/README.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from gcdt.envs import episode_seed, make_env
+from gcdt.policies.trained import TrainedPolicy
+from gcdt.policies.scripted import GRASP_WIDTH, MISSED_WIDTH
+
+SEED = 5000
+
+
+def diagnose(checkpoint: str, target_return: float, episodes: int) -> dict:
+    policy = TrainedPolicy(checkpoint, "pick_and_place", target_return=target_return)
+    env = make_env("pick_and_place", "sparse")
+    counts = {"success": 0, "failed_never_held": 0, "failed_after_holding": 0}
+    closed_far = 0
+    for j in range(episodes):
+        policy.reset(1, SEED + j)
+        obs, _ = env.reset(seed=episode_seed(SEED, j))
+        start, reward = np.ones(1, bool), np.zeros(1, np.float32)
+        held = success = False
+        for _ in range(50):
+            o = obs["observation"]
+            action = policy.predict({k: v[None] for k, v in obs.items()}, start, reward)[0]
+            closed_far += int(action[3] < 0 and np.linalg.norm(o[7:10] - o[:3]) > 0.03)
+            obs, r, terminated, truncated, _ = env.step(action)
+            o = obs["observation"]
+            near = np.linalg.norm(o[7:10] - o[:3]) < 0.02
+            held |= bool(near and MISSED_WIDTH < o[6] < GRASP_WIDTH)
+            start[:], reward[:] = False, r
+            if terminated or truncated:
+                success = bool(terminated)
+                break
+        key = "success" if success else ("failed_after_holding" if held else "failed_never_held")
+        counts[key] += 1
+    return {
+        "command": "python " + " ".join(sys.argv),
+        "checkpoint": checkpoint,
+        "target_return": target_return,
+        "episodes": episodes,
+        **counts,
+        "success_rate": counts["success"] / episodes,
+        "gripper_closed_far_from_cube_steps": closed_far,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("checkpoint")
+    parser.add_argument("--target-return", type=float, default=0.0)
+    parser.add_argument("--episodes", type=int, default=150)
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args()
+    result = diagnose(args.checkpoint, args.target_return, args.episodes)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()

@@ -116,7 +116,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=10)
     parser.add_argument("--repeats", type=int, default=3)
-    # A CPU without native bfloat16 (AVX512-BF16 / AMX) emulates it ~15x slower than fp32.
+    # Few bf16 steps: a CPU without native bfloat16 (AVX512-BF16 / AMX; machine info's
+    # cpu_bf16) emulates it ~15-25x slower than fp32.
     parser.add_argument("--bf16-steps", type=int, default=2)
     args = parser.parse_args()
     # As `gcdt train` on CPU. Process-wide, so the HuggingFace cells run under it too.

@@ -52,15 +52,28 @@ def git_commit() -> str | None:
     return f"{head}+dirty" if dirty else head
 
 
-def cpu_model() -> str:
-    """The CPU's model name (Linux), else what `platform` knows."""
+def _cpuinfo_field(name: str) -> str | None:
+    """The first `name : value` of /proc/cpuinfo (Linux), or None."""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
+            if line.split(":", 1)[0].strip() == name:
                 return line.split(":", 1)[1].strip()
     except OSError:
         pass
-    return platform.processor() or platform.machine()
+    return None
+
+
+def cpu_model() -> str:
+    """The CPU's model name (Linux), else what `platform` knows."""
+    return _cpuinfo_field("model name") or platform.processor() or platform.machine()
+
+
+def cpu_bf16() -> bool | None:
+    """Whether the CPU computes bfloat16 natively (AVX512-BF16 or AMX); None if unknown.
+
+    Without it bf16 autocast on CPU is emulated and several times slower than fp32."""
+    flags = _cpuinfo_field("flags")
+    return None if flags is None else bool({"avx512_bf16", "amx_bf16"} & set(flags.split()))
 
 
 def machine_info() -> dict[str, Any]:
@@ -69,6 +82,7 @@ def machine_info() -> dict[str, Any]:
 
     return {
         "cpu": cpu_model(),
+        "cpu_bf16": cpu_bf16(),
         "cores": os.cpu_count(),
         "python": platform.python_version(),
         "torch": torch.__version__,

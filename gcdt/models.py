@@ -82,10 +82,12 @@ def _cpu_keep_scale(x: torch.Tensor, p: float) -> torch.Tensor:
     """
     threshold = round(p * 65536)
     seed = int(torch.randint(0, 2**62, (1,)))
-    bits = np.random.Generator(np.random.SFC64(seed)).bytes(2 * x.numel())
-    keep = np.frombuffer(bits, np.uint16).reshape(x.shape) >= threshold
-    scale = keep.astype(np.float32)
-    scale *= np.float32(65536 / (65536 - threshold))
+    n = x.numel()
+    # The generator's raw 64-bit words, read as 16-bit numbers: on a little-endian CPU the
+    # very bits `Generator.bytes(2 * n)` returns, at half its cost (tested).
+    bits = np.random.SFC64(seed).random_raw((n + 3) // 4).view(np.uint16)[:n]
+    keep = (bits >= threshold).reshape(x.shape)
+    scale = np.multiply(keep, np.float32(65536 / (65536 - threshold)), dtype=np.float32)
     return torch.from_numpy(scale).to(x.dtype)
 
 
@@ -163,10 +165,14 @@ class _Block(nn.Module):
                 attention.append(weights.detach())  # [batch, heads, queries, 3K]
             y = dropout(weights, self.dropout, self.training) @ v
         drop, training = self.dropout, self.training
-        x = add_dropout(x, self.proj(y.transpose(1, 2).reshape(b, -1, h)), drop, training)
-        # In place: the MLP's widest activation [batch, 3K, 4 hidden] is not written twice.
+        # Rows of tokens from here on, [batch * queries, hidden]: a Linear's 3-D output is a
+        # view of its 2-D result, and an in-place op on that view makes autograd zero-fill
+        # and copy the whole base in backward (profiled: a sixth of a CPU training step).
+        x = add_dropout(x.reshape(-1, h), self.proj(y.transpose(1, 2).reshape(-1, h)),
+                        drop, training)  # fmt: skip
+        # In place: the MLP's widest activation [rows, 4 hidden] is not written twice.
         hidden = F.relu(self.fc(self.ln_2(x)), inplace=True)
-        return add_dropout(x, self.fc_proj(hidden), drop, training)
+        return add_dropout(x, self.fc_proj(hidden), drop, training).view(b, -1, h)
 
 
 class GoalConditionedDT(nn.Module):

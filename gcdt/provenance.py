@@ -33,7 +33,10 @@ def utc_now() -> str:
 
 
 def git_commit() -> str | None:
-    """The repository's HEAD commit (with `+dirty` when the tree has changes), or None."""
+    """The repository's HEAD commit (with `+dirty` when the code has changes), or None.
+
+    Changes under results/ and figures/ do not count: they are what a run writes, so a
+    `make reproduce` would otherwise always call its own commit dirty."""
     try:
         head = subprocess.run(
             ["git", "-C", str(REPO_ROOT), "rev-parse", "HEAD"],
@@ -42,7 +45,8 @@ def git_commit() -> str | None:
             check=True,
         ).stdout.strip()
         dirty = subprocess.run(
-            ["git", "-C", str(REPO_ROOT), "status", "--porcelain", "--untracked-files=no"],
+            ["git", "-C", str(REPO_ROOT), "status", "--porcelain", "--untracked-files=no",
+             "--", ".", ":!results", ":!figures"],  # fmt: skip
             capture_output=True,
             text=True,
             check=True,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 
@@ -11,6 +12,7 @@ from gcdt.models import (
     BCPolicyNet,
     DTConfig,
     GoalConditionedDT,
+    _cpu_keep_scale,
     add_dropout,
     dropout,
     state_columns,
@@ -161,3 +163,17 @@ def test_in_place_residual_dropout_computes_the_same_numbers_and_gradients():
     for plain, fused in zip(*results, strict=True):
         assert torch.equal(plain, fused)  # bit for bit: results do not depend on the fast path
     assert torch.equal(add_dropout(x0, y0.clone(), 0.1, training=False), x0 + y0)
+
+
+@pytest.mark.parametrize("shape", [(1,), (3,), (5, 7), (64, 60, 128)])
+def test_cpu_dropout_mask_is_the_documented_stream(shape):
+    """The mask's bits are `Generator.bytes` of SFC64 seeded from torch's generator, as
+    first written: reading the raw words instead must not change any run's numbers."""
+    x = torch.ones(shape)
+    torch.manual_seed(11)
+    seed = int(torch.randint(0, 2**62, (1,)))
+    n = x.numel()
+    bits = np.frombuffer(np.random.Generator(np.random.SFC64(seed)).bytes(2 * n), np.uint16)
+    expected = (bits.reshape(shape) >= 6554).astype(np.float32) * np.float32(65536 / 58982)
+    torch.manual_seed(11)
+    assert torch.equal(_cpu_keep_scale(x, 0.1), torch.from_numpy(expected))

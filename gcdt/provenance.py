@@ -44,9 +44,17 @@ def git_commit() -> str | None:
             text=True,
             check=True,
         ).stdout.strip()
+        code_only = ["--", ".", ":!results", ":!figures"]
         dirty = subprocess.run(
-            ["git", "-C", str(REPO_ROOT), "status", "--porcelain", "--untracked-files=no",
-             "--", ".", ":!results", ":!figures"],  # fmt: skip
+            [
+                "git",
+                "-C",
+                str(REPO_ROOT),
+                "status",
+                "--porcelain",
+                "--untracked-files=no",
+                *code_only,
+            ],
             capture_output=True,
             text=True,
             check=True,

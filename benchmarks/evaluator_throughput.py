@@ -10,6 +10,9 @@ each cell the median of interleaved repeats, resets included:
   nothing else, the ceiling for anything that steps N envs;
 * `evaluate_gcdt_<N>_envs`: `gcdt.evaluation.evaluate` running a GC-DT checkpoint (the
   paper's config) on the same N envs; also with 1 env, for `--authors-timesteps` steps;
+  `predict_in_loop_ms_<N>_envs` is the time its forward passes took per step inside that run;
+* `evaluate_random_<N>_envs`: `evaluate` running uniform random actions, as the ceiling
+  does: what the evaluator itself costs on top of the simulator;
 * `authors_unbatched`: the authors' evaluation, one episode at a time on one in-process env,
   the context re-padded with `torch.cat` every step and the whole sequence run through
   HuggingFace `DecisionTransformerModel` (their model; gcdt's equivalent model when
@@ -26,20 +29,26 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
 from common import raw_vector, write_report
 
 from gcdt.data import collect
 from gcdt.envs import episode_seed, goal_state, make_env
-from gcdt.evaluation import evaluate
-from gcdt.policies import make_policy
-from gcdt.policies.trained import TrainedPolicy
-from gcdt.training import TrainConfig, load_checkpoint, train
+
+if TYPE_CHECKING:
+    import torch
+
+# The env workers are spawned, and spawn runs this script's top level again in each of them:
+# torch and the gcdt modules that load it are imported where used, or 16 workers would each
+# import torch (20 s more per start of 16 envs on 2 cores, for nothing they use).
 
 
 def _checkpoint(task: str, tmp: Path) -> Path:
+    from gcdt.policies import make_policy
+    from gcdt.training import TrainConfig, train
+
     data = collect(make_policy("random", task), task, 200, progress=False)
     return train(data, TrainConfig(steps=1), tmp / "dt", progress=False).checkpoint
 
@@ -50,6 +59,8 @@ def _authors_model(ckpt: dict) -> tuple[Callable[..., torch.Tensor], str]:
     try:
         import transformers
     except ImportError:
+        from gcdt.policies.trained import TrainedPolicy
+
         policy = TrainedPolicy(ckpt)
         return policy.model, "gcdt GoalConditionedDT (transformers not installed)"
     hf = transformers.DecisionTransformerModel(
@@ -72,44 +83,68 @@ def _authors_model(ckpt: dict) -> tuple[Callable[..., torch.Tensor], str]:
     return forward, f"transformers {transformers.__version__} DecisionTransformerModel"
 
 
-@torch.no_grad()
 def authors_unbatched(task: str, ckpt: dict, timesteps: int) -> float:
     """Steps/s of the authors' evaluation loop (HF's `get_action` recipe) on one env."""
-    model, _ = _authors_model(ckpt)
-    k, scale = ckpt["model_config"]["context"], ckpt["train_config"]["return_scale"]
-    mean, std = ckpt["state_mean"], ckpt["state_std"]
-    a_dim = ckpt["model_config"]["action_dim"]
-    with contextlib.closing(make_env(task, "sparse")) as env:
-        started, steps, episode = time.perf_counter(), 0, 0
-        while steps < timesteps:
-            obs, _ = env.reset(seed=episode_seed(0, episode))
-            state = lambda o: torch.as_tensor(goal_state(o), dtype=torch.float32)  # noqa: E731
-            states, actions = state(obs)[None], torch.zeros(0, a_dim)
-            rtg, ts = torch.zeros(1, 1), torch.zeros(1, 1, dtype=torch.long)
-            done = False
-            while not done and steps < timesteps:
-                actions = torch.cat([actions, torch.zeros(1, a_dim)])
-                s, a, r, t = ((states - mean) / std)[-k:], actions[-k:], rtg[0, -k:], ts[0, -k:]
-                pad = k - s.shape[0]  # left padding, rebuilt every step
-                mask = torch.cat([torch.zeros(pad), torch.ones(s.shape[0])])[None]
-                s = torch.cat([torch.zeros(pad, s.shape[1]), s])[None]
-                a = torch.cat([torch.zeros(pad, a_dim), a])[None]
-                r = torch.cat([torch.zeros(pad), r])[None, :, None]
-                t = torch.cat([torch.zeros(pad, dtype=torch.long), t])[None]
-                action = model(s, a, r, t, mask.bool())[0, -1]
-                actions[-1] = action
-                obs, reward, terminated, truncated, _ = env.step(action.numpy())
-                states = torch.cat([states, state(obs)[None]])
-                rtg = torch.cat([rtg, (rtg[0, -1] - reward / scale).reshape(1, 1)], dim=1)
-                ts = torch.cat([ts, torch.full((1, 1), ts[0, -1] + 1)], dim=1)
-                done, steps = terminated or truncated, steps + 1
-            episode += 1
-        return steps / (time.perf_counter() - started)
+    import torch
+
+    with torch.no_grad():
+        model, _ = _authors_model(ckpt)
+        k, scale = ckpt["model_config"]["context"], ckpt["train_config"]["return_scale"]
+        mean, std = ckpt["state_mean"], ckpt["state_std"]
+        a_dim = ckpt["model_config"]["action_dim"]
+        with contextlib.closing(make_env(task, "sparse")) as env:
+            started, steps, episode = time.perf_counter(), 0, 0
+            while steps < timesteps:
+                obs, _ = env.reset(seed=episode_seed(0, episode))
+                state = lambda o: torch.as_tensor(goal_state(o), dtype=torch.float32)  # noqa: E731
+                states, actions = state(obs)[None], torch.zeros(0, a_dim)
+                rtg, ts = torch.zeros(1, 1), torch.zeros(1, 1, dtype=torch.long)
+                done = False
+                while not done and steps < timesteps:
+                    actions = torch.cat([actions, torch.zeros(1, a_dim)])
+                    s, a, r, t = ((states - mean) / std)[-k:], actions[-k:], rtg[0, -k:], ts[0, -k:]
+                    pad = k - s.shape[0]  # left padding, rebuilt every step
+                    mask = torch.cat([torch.zeros(pad), torch.ones(s.shape[0])])[None]
+                    s = torch.cat([torch.zeros(pad, s.shape[1]), s])[None]
+                    a = torch.cat([torch.zeros(pad, a_dim), a])[None]
+                    r = torch.cat([torch.zeros(pad), r])[None, :, None]
+                    t = torch.cat([torch.zeros(pad, dtype=torch.long), t])[None]
+                    action = model(s, a, r, t, mask.bool())[0, -1]
+                    actions[-1] = action
+                    obs, reward, terminated, truncated, _ = env.step(action.numpy())
+                    states = torch.cat([states, state(obs)[None]])
+                    rtg = torch.cat([rtg, (rtg[0, -1] - reward / scale).reshape(1, 1)], dim=1)
+                    ts = torch.cat([ts, torch.full((1, 1), ts[0, -1] + 1)], dim=1)
+                    done, steps = terminated or truncated, steps + 1
+                episode += 1
+            return steps / (time.perf_counter() - started)
+
+
+class _Timed:
+    """`policy` with the wall time of its `predict` calls summed in `seconds` (a Policy by
+    duck typing: subclassing gcdt's would import torch at this script's top level)."""
+
+    def __init__(self, policy: Any) -> None:
+        self.policy, self.name, self.task, self.seconds = policy, policy.name, policy.task, 0.0
+
+    def reset(self, n_envs: int, seed: int | None = None) -> None:
+        self.policy.reset(n_envs, seed)
+
+    def predict(self, obs, episode_start, reward) -> np.ndarray:
+        began = time.perf_counter()
+        action = self.policy.predict(obs, episode_start, reward)
+        self.seconds += time.perf_counter() - began
+        return action
+
+    def config(self) -> dict:
+        return self.policy.config()
 
 
 def predict_seconds(path: Path, task: str, n_envs: int, calls: int = 100) -> float:
     """Seconds per `predict` of the GC-DT policy on `n_envs` envs with a full K-step context:
     the time a synchronous evaluator adds to each step of the vector env."""
+    from gcdt.policies.trained import TrainedPolicy
+
     policy = TrainedPolicy(path, task)
     policy.reset(n_envs)
     with contextlib.closing(make_env(task, "sparse")) as env:
@@ -132,24 +167,43 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     n, task = args.envs, args.task
+    import torch
+
+    from gcdt.evaluation import evaluate
+    from gcdt.policies import make_policy
+    from gcdt.policies.trained import TrainedPolicy
+    from gcdt.training import load_checkpoint
+
     with tempfile.TemporaryDirectory() as tmp:
         path = _checkpoint(task, Path(tmp))
         ckpt = load_checkpoint(path)
 
-        def gcdt(n_envs: int, timesteps: int) -> float:
-            result = evaluate(TrainedPolicy(path, task), task, "sparse",
-                              timesteps=timesteps, n_envs=n_envs, progress=False)  # fmt: skip
+        samples: dict[str, list[float]] = {f"predict_in_loop_ms_{n}_envs": []}
+
+        def run(policy: Any, n_envs: int, timesteps: int) -> float:
+            timed = _Timed(policy)
+            result = evaluate(timed, task, "sparse", timesteps=timesteps, n_envs=n_envs,
+                              progress=False)  # fmt: skip
+            if n_envs == n and policy.name != "random":
+                vector_steps = -(-timesteps // n_envs)
+                samples[f"predict_in_loop_ms_{n}_envs"].append(1e3 * timed.seconds / vector_steps)
             return result.summary["steps_per_second"]
+
+        def gcdt(n_envs: int, timesteps: int) -> float:
+            return run(TrainedPolicy(path, task), n_envs, timesteps)
 
         cells: dict[str, Callable[[], float]] = {
             f"raw_vector_{n}_envs": lambda: raw_vector(task, args.timesteps, n),
+            f"evaluate_random_{n}_envs": lambda: run(
+                make_policy("random", task), n, args.timesteps
+            ),
             f"evaluate_gcdt_{n}_envs": lambda: gcdt(n, args.timesteps),
             # As many steps as the authors' loop: one env is as slow as it, per step.
             "evaluate_gcdt_1_envs": lambda: gcdt(1, args.authors_timesteps),
             "authors_unbatched": lambda: authors_unbatched(task, ckpt, args.authors_timesteps),
             f"predict_ms_{n}_envs": lambda: 1e3 * predict_seconds(path, task, n),
         }
-        samples: dict[str, list[float]] = {k: [] for k in cells}
+        samples.update({k: [] for k in cells})
         for _ in range(args.repeats):  # interleaved: this VM's speed drifts within minutes
             for key, measure in cells.items():
                 samples[key].append(measure())
@@ -157,9 +211,14 @@ def main() -> None:
     rows = {k: float(np.median(v)) for k, v in samples.items()}
     ours = rows[f"evaluate_gcdt_{n}_envs"]
     rows[f"evaluate_gcdt_{n}_envs_vs_raw"] = ours / rows[f"raw_vector_{n}_envs"]
+    rows[f"evaluate_random_{n}_envs_vs_raw"] = (
+        rows[f"evaluate_random_{n}_envs"] / rows[f"raw_vector_{n}_envs"]
+    )
     rows[f"evaluate_gcdt_{n}_envs_vs_authors"] = ours / rows["authors_unbatched"]
     # The best a synchronous evaluator can do: the envs wait while the policy runs, and on a
     # machine whose cores the env processes already fill, overlapping the two gains nothing.
+    # It assumes both run as fast as alone; in the loop they evict each other's caches
+    # (compare predict_in_loop_ms with predict_ms).
     bound = n / (n / rows[f"raw_vector_{n}_envs"] + rows[f"predict_ms_{n}_envs"] / 1e3)
     rows[f"bound_{n}_envs"] = bound
     rows[f"bound_{n}_envs_vs_raw"] = bound / rows[f"raw_vector_{n}_envs"]

@@ -57,6 +57,10 @@ def targets_section() -> str | None:
         if res.get("speedup_vs_huggingface_bf16") is not None:
             x = res["speedup_vs_huggingface_bf16"]
             rows.append(["DT training step vs HF, bf16 autocast", f"{x:.2f}x", "-", "-"])
+        if res.get("speedup_vs_huggingface_fp32_short") is not None:
+            x = res["speedup_vs_huggingface_fp32_short"]
+            rows.append(["DT training step vs HF, fp32, 13-step episodes (the quick profile's "
+                         "PickAndPlace length)", f"{x:.2f}x", "-", "-"])  # fmt: skip
         share = res["dt_sampler_share"]
         rows.append(["batch sampling, share of a DT step", f"{100 * share:.1f} %", "<= 5 %",
                      _verdict(share <= 0.05)])  # fmt: skip
@@ -71,6 +75,9 @@ def targets_section() -> str | None:
         bound = (f"; simulator + forward pass alone: {_pct(res[f'bound_{n}_envs_vs_raw'])}, "
                  f"{res[f'bound_{n}_envs_vs_authors']:.1f}x" if f"bound_{n}_envs" in res
                  else "")  # fmt: skip
+        if f"evaluate_random_{n}_envs_vs_raw" in res:
+            own = res[f"evaluate_random_{n}_envs_vs_raw"]
+            bound += f"; `evaluate` with random actions: {_pct(own)}"
         rows.append([f"`evaluate` GC-DT on {n} envs vs raw random stepping of {n} envs (Push"
                      f"{bound})", _pct(vs_raw), ">= 70 %", _verdict(vs_raw >= 0.7)])  # fmt: skip
         rows.append([f"`evaluate` GC-DT on {n} envs vs the authors' unbatched loop (Push; "
@@ -122,6 +129,13 @@ def evaluator_section() -> str | None:
         rows.append([f"raw vector env, {n} processes, plus one GC-DT forward pass per step "
                      f"({res[f'predict_ms_{n}_envs']:.1f} ms): a synchronous evaluator's bound",
                      f"{res[f'bound_{n}_envs']:.0f}"])  # fmt: skip
+    if f"evaluate_random_{n}_envs" in res:
+        rows.insert(1, [f"`evaluate`, random actions, {n} envs (the evaluator's own cost)",
+                        f"{res[f'evaluate_random_{n}_envs']:.0f}"])  # fmt: skip
+    if f"predict_in_loop_ms_{n}_envs" in res:
+        rows.append([f"GC-DT forward pass per step inside `evaluate`, ms (alone: "
+                     f"{res[f'predict_ms_{n}_envs']:.1f} ms; shorter contexts early in episodes)",
+                     f"{res[f'predict_in_loop_ms_{n}_envs']:.1f} ms"])  # fmt: skip
     return (
         f"Evaluation throughput on Push, env steps/s, resets included "
         f"(`benchmarks/evaluator_throughput.py`, {r['torch_threads']} torch threads):\n\n"
@@ -204,6 +218,8 @@ def training_section() -> str | None:
         ("huggingface_fp32", "GC-DT, HF (authors), fp32"),
         ("gcdt_bf16", "GC-DT, gcdt, bf16 autocast"),
         ("huggingface_bf16", "GC-DT, HF (authors), bf16 autocast"),
+        ("gcdt_fp32_short", "GC-DT, gcdt, fp32, 13-step episodes"),
+        ("huggingface_fp32_short", "GC-DT, HF (authors), fp32, 13-step episodes"),
         ("bc_fp32", "BC, fp32"),
     )
     rows = [[label, f"{res[f'{k}_ms_per_step']:.1f}", f"{res[f'{k}_samples_per_second']:.0f}"]

@@ -1,6 +1,6 @@
 """DT training throughput: gcdt's trainer step vs the authors' HuggingFace path, and BC's.
 
-    python benchmarks/training_throughput.py [--steps 10] [--repeats 3] [--bf16-steps 2]
+    python benchmarks/training_throughput.py [--steps 10] [--repeats 5] [--bf16-steps 2]
 
 Writes results/bench/training_throughput.json. One full training step (forward, masked MSE,
 backward, clip 0.25, AdamW) of the paper's config (batch 64, K 20, hidden 128, 3 layers,
@@ -12,8 +12,10 @@ backward, clip 0.25, AdamW) of the paper's config (batch 64, K 20, hidden 128, 3
   is not installed (`make bench` installs it).
 Both step on the very same batches, drawn beforehand by gcdt's sampler, whose own cost is
 reported as its share of gcdt's step. Data: a PickAndPlace-shaped dataset of 1,000 50-step
-episodes (the cost depends on shapes only). Cells run interleaved, each gcdt cell beside its HF
-twin; a cell's time is the median of the repeats, the speed-up the median of the repeats'
+episodes (19 % of a window's tokens are left padding), and for the `*_short` cells one of
+13-step episodes, the length of the quick profile's scripted PickAndPlace episodes (63 %
+padding, which gcdt skips and HF computes). Cells run interleaved, each gcdt cell beside its
+HF twin; a cell's time is the median of the repeats, the speed-up the median of the repeats'
 paired ratios.
 """
 
@@ -115,7 +117,7 @@ def _huggingface(bf16: bool, dim: int, batches: list[dict[str, torch.Tensor]]):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=10)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=5)
     # Few bf16 steps: a CPU without native bfloat16 (AVX512-BF16 / AMX; machine info's
     # cpu_bf16) emulates it ~15-25x slower than fp32.
     parser.add_argument("--bf16-steps", type=int, default=2)
@@ -125,16 +127,13 @@ def main() -> None:
     dataset = _dataset()
     dim = dataset.spec.state_dim
     rng = np.random.default_rng(0)
-    samplers = {
-        method: WindowSampler(
-            dataset,
-            TrainConfig(method=method),
-            np.zeros(dim, np.float32),
-            np.ones(dim, np.float32),
-            CPU,
-        )
-        for method in ("dt", "bc")
-    }
+
+    def sampler(data, method: str) -> WindowSampler:
+        zeros, ones = np.zeros(dim, np.float32), np.ones(dim, np.float32)
+        return WindowSampler(data, TrainConfig(method=method), zeros, ones, CPU)
+
+    samplers = {method: sampler(dataset, method) for method in ("dt", "bc")}
+    samplers["dt_short"] = sampler(_dataset(length=13), "dt")
     batches = {m: [s.sample(rng) for _ in range(8)] for m, s in samplers.items()}
     hf = _version("transformers") != "not installed"
     # Each gcdt cell right beside its HF twin: this VM's speed drifts within minutes.
@@ -143,6 +142,12 @@ def main() -> None:
         **({"huggingface_fp32": lambda: _huggingface(False, dim, batches["dt"])} if hf else {}),
         "gcdt_bf16": lambda: _gcdt(TrainConfig(bf16=True), dim, batches["dt"]),
         **({"huggingface_bf16": lambda: _huggingface(True, dim, batches["dt"])} if hf else {}),
+        "gcdt_fp32_short": lambda: _gcdt(TrainConfig(), dim, batches["dt_short"]),
+        **(
+            {"huggingface_fp32_short": lambda: _huggingface(False, dim, batches["dt_short"])}
+            if hf
+            else {}
+        ),
         "bc_fp32": lambda: _gcdt(TrainConfig(method="bc"), dim, batches["bc"]),
         "dt_sampler": lambda: lambda i: samplers["dt"].sample(rng),
         "bc_sampler": lambda: lambda i: samplers["bc"].sample(rng),
@@ -155,11 +160,12 @@ def main() -> None:
             samples[key].append(_time(make(), steps, warmup))
     ms = {k: float(np.median(v)) for k, v in samples.items()}
     results: dict[str, float | None] = {}
-    for key in ("gcdt_fp32", "gcdt_bf16", "huggingface_fp32", "huggingface_bf16", "bc_fp32"):
+    for key in ("gcdt_fp32", "gcdt_bf16", "huggingface_fp32", "huggingface_bf16",
+                "gcdt_fp32_short", "huggingface_fp32_short", "bc_fp32"):  # fmt: skip
         if key in ms:
             results[f"{key}_ms_per_step"] = round(ms[key], 2)
             results[f"{key}_samples_per_second"] = round(64e3 / ms[key], 1)
-    for precision in ("fp32", "bf16"):  # median of the paired (same-repeat) ratios
+    for precision in ("fp32", "bf16", "fp32_short"):  # median of the paired ratios
         ours, theirs = samples[f"gcdt_{precision}"], samples.get(f"huggingface_{precision}")
         results[f"speedup_vs_huggingface_{precision}"] = (
             None if theirs is None else round(float(np.median(np.divide(theirs, ours))), 3)
@@ -177,6 +183,11 @@ def main() -> None:
             "heads": 1,
             "dropout": 0.1,
             "state_dim": dim,
+            "episode_steps": {"dt": 50, "dt_short": 13},
+            "padding_share": {  # of the tokens of the batches timed
+                m: round(1 - float(torch.cat([b["mask"] for b in batches[m]]).float().mean()), 3)
+                for m in ("dt", "dt_short")
+            },
         },
         "targets": {"speedup_vs_huggingface_fp32": ">= 1.5", "dt_sampler_share": "<= 0.05"},
         "huggingface": "transformers " + _version("transformers"),

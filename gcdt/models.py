@@ -146,6 +146,13 @@ class _Rows:
         flat = grid.reshape(-1, grid.shape[-1])
         return flat if self.index is None else flat.index_select(0, self.index)
 
+    def numbers(self, positions: torch.Tensor, out: _Rows) -> torch.Tensor:
+        """Which of this layout's rows are the rows of `out`, the layout of the tokens at
+        grid `positions`: an index for `index_select` on rows, no round trip through the grid."""
+        n = self.shape.numel() if self.index is None else self.index.numel()
+        ids = self.grid(torch.arange(n, device=positions.device)[:, None])
+        return out.rows(ids[:, positions]).squeeze(1)
+
 
 class _Block(nn.Module):
     """One GPT-2 block: pre-LayerNorm attention and ReLU MLP, each with a residual."""
@@ -180,9 +187,9 @@ class _Block(nn.Module):
         else:
             positions, out = queries
             w, bias = self.qkv.weight, self.qkv.bias
-            x, mask = out.rows(layout.grid(x)[:, positions]), mask[:, :, positions]
-            hq = out.rows(layout.grid(hx)[:, positions])
-            q = out.grid(F.linear(hq, w[:h], bias[:h]))
+            picked = layout.numbers(positions, out)
+            x, mask = x.index_select(0, picked), mask[:, :, positions]
+            q = out.grid(F.linear(hx.index_select(0, picked), w[:h], bias[:h]))
             k, v = layout.grid(F.linear(hx, w[h:], bias[h:])).split(h, dim=2)
         b = q.shape[0]
         q = q.view(b, -1, heads, width).transpose(1, 2)  # [batch, heads, queries, width]

@@ -3,9 +3,11 @@ authors' loop.
 
     python benchmarks/evaluator_throughput.py [--task push] [--timesteps 2000] [--envs 16]
                                               [--authors-timesteps 500] [--repeats 3]
+                                              [--device cpu|cuda]
 
-Writes results/bench/evaluator_throughput_<task>.json. Compared in one run, on one machine,
-each cell the median of interleaved repeats, resets included:
+Writes results/bench/evaluator_throughput_<task>.json (`_cuda.json` with `--device cuda`, where
+both DT paths run their model on the GPU). Compared in one run, on one machine, each cell the
+median of interleaved repeats, resets included:
 * `raw_vector_<N>_envs`: the vector env of N processes stepped with random actions and
   nothing else, the ceiling for anything that steps N envs;
 * `evaluate_gcdt_<N>_envs`: `gcdt.evaluation.evaluate` running a GC-DT checkpoint (the
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import tempfile
 import time
 from collections.abc import Callable
@@ -53,7 +56,7 @@ def _checkpoint(task: str, tmp: Path) -> Path:
     return train(data, TrainConfig(steps=1), tmp / "dt", progress=False).checkpoint
 
 
-def _authors_model(ckpt: dict) -> tuple[Callable[..., torch.Tensor], str]:
+def _authors_model(ckpt: dict, device: str) -> tuple[Callable[..., torch.Tensor], str]:
     """(forward returning action predictions [1, T, action_dim], which model it is)."""
     cfg = ckpt["model_config"]
     try:
@@ -61,20 +64,24 @@ def _authors_model(ckpt: dict) -> tuple[Callable[..., torch.Tensor], str]:
     except ImportError:
         from gcdt.policies.trained import TrainedPolicy
 
-        policy = TrainedPolicy(ckpt)
+        policy = TrainedPolicy(ckpt, device=device)
         return policy.model, "gcdt GoalConditionedDT (transformers not installed)"
-    hf = transformers.DecisionTransformerModel(
-        transformers.DecisionTransformerConfig(
-            state_dim=cfg["state_dim"],
-            act_dim=cfg["action_dim"],
-            hidden_size=cfg["hidden"],
-            n_layer=cfg["layers"],
-            n_head=cfg["heads"],
-            activation_function="relu",
-            max_ep_len=cfg["max_episode_steps"],
-            action_tanh=True,
+    hf = (
+        transformers.DecisionTransformerModel(
+            transformers.DecisionTransformerConfig(
+                state_dim=cfg["state_dim"],
+                act_dim=cfg["action_dim"],
+                hidden_size=cfg["hidden"],
+                n_layer=cfg["layers"],
+                n_head=cfg["heads"],
+                activation_function="relu",
+                max_ep_len=cfg["max_episode_steps"],
+                action_tanh=True,
+            )
         )
-    ).eval()
+        .to(device)
+        .eval()
+    )
 
     def forward(states, actions, rtg, timesteps, mask):
         return hf(states=states, actions=actions, returns_to_go=rtg, timesteps=timesteps,
@@ -83,38 +90,42 @@ def _authors_model(ckpt: dict) -> tuple[Callable[..., torch.Tensor], str]:
     return forward, f"transformers {transformers.__version__} DecisionTransformerModel"
 
 
-def authors_unbatched(task: str, ckpt: dict, timesteps: int) -> float:
+def authors_unbatched(task: str, ckpt: dict, timesteps: int, device: str) -> float:
     """Steps/s of the authors' evaluation loop (HF's `get_action` recipe) on one env."""
     import torch
 
     with torch.no_grad():
-        model, _ = _authors_model(ckpt)
+        model, _ = _authors_model(ckpt, device)
         k, scale = ckpt["model_config"]["context"], ckpt["train_config"]["return_scale"]
-        mean, std = ckpt["state_mean"], ckpt["state_std"]
+        mean, std = ckpt["state_mean"].to(device), ckpt["state_std"].to(device)
         a_dim = ckpt["model_config"]["action_dim"]
+        zeros = functools.partial(torch.zeros, device=device)
         with contextlib.closing(make_env(task, "sparse")) as env:
             started, steps, episode = time.perf_counter(), 0, 0
             while steps < timesteps:
                 obs, _ = env.reset(seed=episode_seed(0, episode))
-                state = lambda o: torch.as_tensor(goal_state(o), dtype=torch.float32)  # noqa: E731
-                states, actions = state(obs)[None], torch.zeros(0, a_dim)
-                rtg, ts = torch.zeros(1, 1), torch.zeros(1, 1, dtype=torch.long)
+
+                def state(o):
+                    return torch.as_tensor(goal_state(o), dtype=torch.float32, device=device)
+
+                states, actions = state(obs)[None], zeros(0, a_dim)
+                rtg, ts = zeros(1, 1), zeros(1, 1, dtype=torch.long)
                 done = False
                 while not done and steps < timesteps:
-                    actions = torch.cat([actions, torch.zeros(1, a_dim)])
+                    actions = torch.cat([actions, zeros(1, a_dim)])
                     s, a, r, t = ((states - mean) / std)[-k:], actions[-k:], rtg[0, -k:], ts[0, -k:]
                     pad = k - s.shape[0]  # left padding, rebuilt every step
-                    mask = torch.cat([torch.zeros(pad), torch.ones(s.shape[0])])[None]
-                    s = torch.cat([torch.zeros(pad, s.shape[1]), s])[None]
-                    a = torch.cat([torch.zeros(pad, a_dim), a])[None]
-                    r = torch.cat([torch.zeros(pad), r])[None, :, None]
-                    t = torch.cat([torch.zeros(pad, dtype=torch.long), t])[None]
+                    mask = torch.cat([zeros(pad), torch.ones(s.shape[0], device=device)])[None]
+                    s = torch.cat([zeros(pad, s.shape[1]), s])[None]
+                    a = torch.cat([zeros(pad, a_dim), a])[None]
+                    r = torch.cat([zeros(pad), r])[None, :, None]
+                    t = torch.cat([zeros(pad, dtype=torch.long), t])[None]
                     action = model(s, a, r, t, mask.bool())[0, -1]
                     actions[-1] = action
-                    obs, reward, terminated, truncated, _ = env.step(action.numpy())
+                    obs, reward, terminated, truncated, _ = env.step(action.cpu().numpy())
                     states = torch.cat([states, state(obs)[None]])
                     rtg = torch.cat([rtg, (rtg[0, -1] - reward / scale).reshape(1, 1)], dim=1)
-                    ts = torch.cat([ts, torch.full((1, 1), ts[0, -1] + 1)], dim=1)
+                    ts = torch.cat([ts, (ts[0, -1] + 1).reshape(1, 1)], dim=1)
                     done, steps = terminated or truncated, steps + 1
                 episode += 1
             return steps / (time.perf_counter() - started)
@@ -140,12 +151,12 @@ class _Timed:
         return self.policy.config()
 
 
-def predict_seconds(path: Path, task: str, n_envs: int, calls: int = 100) -> float:
+def predict_seconds(path: Path, task: str, n_envs: int, device: str, calls: int = 100) -> float:
     """Seconds per `predict` of the GC-DT policy on `n_envs` envs with a full K-step context:
     the time a synchronous evaluator adds to each step of the vector env."""
     from gcdt.policies.trained import TrainedPolicy
 
-    policy = TrainedPolicy(path, task)
+    policy = TrainedPolicy(path, task, device=device)
     policy.reset(n_envs)
     with contextlib.closing(make_env(task, "sparse")) as env:
         obs = {k: np.repeat(v[None], n_envs, 0) for k, v in env.reset(seed=0)[0].items()}
@@ -165,8 +176,9 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=16)
     parser.add_argument("--authors-timesteps", type=int, default=500)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--device", default="cpu", help="where both DT paths run their model")
     args = parser.parse_args()
-    n, task = args.envs, args.task
+    n, task, device = args.envs, args.task, args.device
     import torch
 
     from gcdt.evaluation import evaluate
@@ -190,7 +202,7 @@ def main() -> None:
             return result.summary["steps_per_second"]
 
         def gcdt(n_envs: int, timesteps: int) -> float:
-            return run(TrainedPolicy(path, task), n_envs, timesteps)
+            return run(TrainedPolicy(path, task, device=device), n_envs, timesteps)
 
         cells: dict[str, Callable[[], float]] = {
             f"raw_vector_{n}_envs": lambda: raw_vector(task, args.timesteps, n),
@@ -200,14 +212,16 @@ def main() -> None:
             f"evaluate_gcdt_{n}_envs": lambda: gcdt(n, args.timesteps),
             # As many steps as the authors' loop: one env is as slow as it, per step.
             "evaluate_gcdt_1_envs": lambda: gcdt(1, args.authors_timesteps),
-            "authors_unbatched": lambda: authors_unbatched(task, ckpt, args.authors_timesteps),
-            f"predict_ms_{n}_envs": lambda: 1e3 * predict_seconds(path, task, n),
+            "authors_unbatched": lambda: authors_unbatched(
+                task, ckpt, args.authors_timesteps, device
+            ),
+            f"predict_ms_{n}_envs": lambda: 1e3 * predict_seconds(path, task, n, device),
         }
         samples.update({k: [] for k in cells})
         for _ in range(args.repeats):  # interleaved: this VM's speed drifts within minutes
             for key, measure in cells.items():
                 samples[key].append(measure())
-        authors_model = _authors_model(ckpt)[1]
+        authors_model = _authors_model(ckpt, device)[1]
     rows = {k: float(np.median(v)) for k, v in samples.items()}
     ours = rows[f"evaluate_gcdt_{n}_envs"]
     rows[f"evaluate_gcdt_{n}_envs_vs_raw"] = ours / rows[f"raw_vector_{n}_envs"]
@@ -230,6 +244,7 @@ def main() -> None:
         "timesteps": args.timesteps,
         "authors_timesteps": args.authors_timesteps,
         "authors_model": authors_model,
+        "device": device,
         "targets": {
             f"evaluate_gcdt_{n}_envs_vs_raw": ">= 0.7",
             f"evaluate_gcdt_{n}_envs_vs_authors": ">= 4",
@@ -238,7 +253,8 @@ def main() -> None:
         "results": {k: round(v, 3 if "_vs_" in k else 1) for k, v in rows.items()},
         "samples": {k: [round(x, 1) for x in v] for k, v in samples.items()},
     }
-    write_report(f"evaluator_throughput_{task}", "evaluator_throughput.py", report)
+    suffix = "" if device == "cpu" else f"_{device.split(':')[0]}"
+    write_report(f"evaluator_throughput_{task}{suffix}", "evaluator_throughput.py", report)
 
 
 if __name__ == "__main__":

@@ -1,10 +1,11 @@
 """DT training throughput: gcdt's trainer step vs the authors' HuggingFace path, and BC's.
 
     python benchmarks/training_throughput.py [--steps 10] [--repeats 5] [--bf16-steps 2]
+                                             [--device cpu|cuda]
 
-Writes results/bench/training_throughput.json. One full training step (forward, masked MSE,
-backward, clip 0.25, AdamW) of the paper's config (batch 64, K 20, hidden 128, 3 layers,
-1 head, dropout 0.1) in fp32 and with bf16 autocast, for
+Writes results/bench/training_throughput.json (`_cuda.json` with `--device cuda`). One full
+training step (forward, masked MSE, backward, clip 0.25, AdamW) of the paper's config (batch
+64, K 20, hidden 128, 3 layers, 1 head, dropout 0.1) in fp32 and with bf16 autocast, for
 * gcdt: `gcdt.training.train_step` with `make_optimizer`, as `gcdt train` runs it;
 * the authors' path: HuggingFace `transformers.DecisionTransformerModel` (the same config,
   ReLU, tanh actions) with the masked-MSE loss of their trainer and torch's AdamW (the HF
@@ -39,10 +40,9 @@ from gcdt.training import (
     build_model,
     keep_freed_memory,
     make_optimizer,
+    resolve_device,
     train_step,
 )
-
-CPU = torch.device("cpu")
 
 
 def _dataset(episodes: int = 1000, length: int = 50):
@@ -66,13 +66,16 @@ def _dataset(episodes: int = 1000, length: int = 50):
     return from_episodes("pick_and_place", eps, {"source": "benchmark"})
 
 
-def _time(step: Callable[[int], object], steps: int, warmup: int = 3) -> float:
-    """ms per call of `step(i)` after `warmup` calls."""
+def _time(step: Callable[[int], object], steps: int, warmup: int, device: torch.device) -> float:
+    """ms per call of `step(i)` after `warmup` calls (a GPU's queue drained at both ends)."""
+    sync = torch.cuda.synchronize if device.type == "cuda" else lambda: None
     for i in range(warmup):
         step(i)
+    sync()
     began = time.perf_counter()
     for i in range(steps):
         step(i)
+    sync()
     return 1e3 * (time.perf_counter() - began) / steps
 
 
@@ -80,9 +83,10 @@ def _gcdt(cfg: TrainConfig, dim: int, batches: list[dict[str, torch.Tensor]]):
     torch.manual_seed(0)
     d, a = dim, 4
     config = DTConfig(d, a) if cfg.method == "dt" else BCConfig(d, a)
-    model = build_model(cfg.method, asdict(config)).train()
+    device = batches[0]["states"].device
+    model = build_model(cfg.method, asdict(config)).to(device).train()
     opt = make_optimizer(model, cfg)
-    return lambda i: train_step(model, opt, batches[i % len(batches)], cfg, CPU)
+    return lambda i: train_step(model, opt, batches[i % len(batches)], cfg, device)
 
 
 def _huggingface(bf16: bool, dim: int, batches: list[dict[str, torch.Tensor]]):
@@ -94,12 +98,13 @@ def _huggingface(bf16: bool, dim: int, batches: list[dict[str, torch.Tensor]]):
         activation_function="relu", resid_pdrop=0.1, embd_pdrop=0.1, attn_pdrop=0.1,
         max_ep_len=1000, action_tanh=True,
     )  # fmt: skip
-    model = transformers.DecisionTransformerModel(config).train()
+    device = batches[0]["states"].device
+    model = transformers.DecisionTransformerModel(config).to(device).train()
     opt = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=1e-4)
 
     def step(i: int) -> None:
         b = batches[i % len(batches)]
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
             _, pred, _ = model(
                 states=b["states"], actions=b["actions"], returns_to_go=b["returns_to_go"],
                 timesteps=b["timesteps"], attention_mask=b["mask"].long(), return_dict=False,
@@ -121,16 +126,18 @@ def main() -> None:
     # Few bf16 steps: a CPU without native bfloat16 (AVX512-BF16 / AMX; machine info's
     # cpu_bf16) emulates it ~15-25x slower than fp32.
     parser.add_argument("--bf16-steps", type=int, default=2)
+    parser.add_argument("--device", default="cpu", help="cpu or cuda (both paths on it)")
     args = parser.parse_args()
-    # As `gcdt train` on CPU. Process-wide, so the HuggingFace cells run under it too.
-    keep_freed_memory()
+    device = resolve_device(args.device)
+    if device.type == "cpu":  # as `gcdt train` on CPU; process-wide, so HF runs under it too
+        keep_freed_memory()
     dataset = _dataset()
     dim = dataset.spec.state_dim
     rng = np.random.default_rng(0)
 
     def sampler(data, method: str) -> WindowSampler:
         zeros, ones = np.zeros(dim, np.float32), np.ones(dim, np.float32)
-        return WindowSampler(data, TrainConfig(method=method), zeros, ones, CPU)
+        return WindowSampler(data, TrainConfig(method=method), zeros, ones, device)
 
     samplers = {method: sampler(dataset, method) for method in ("dt", "bc")}
     samplers["dt_short"] = sampler(_dataset(length=13), "dt")
@@ -155,9 +162,9 @@ def main() -> None:
     samples: dict[str, list[float]] = {k: [] for k in cells}
     for _ in range(args.repeats):
         for key, make in cells.items():
-            bf16 = key.endswith("bf16")
-            steps, warmup = (args.bf16_steps, 1) if bf16 else (args.steps, 3)
-            samples[key].append(_time(make(), steps, warmup))
+            slow = key.endswith("bf16") and device.type == "cpu"
+            steps, warmup = (args.bf16_steps, 1) if slow else (args.steps, 3)
+            samples[key].append(_time(make(), steps, warmup, device))
     ms = {k: float(np.median(v)) for k, v in samples.items()}
     results: dict[str, float | None] = {}
     for key in ("gcdt_fp32", "gcdt_bf16", "huggingface_fp32", "huggingface_bf16",
@@ -191,11 +198,13 @@ def main() -> None:
         },
         "targets": {"speedup_vs_huggingface_fp32": ">= 1.5", "dt_sampler_share": "<= 0.05"},
         "huggingface": "transformers " + _version("transformers"),
+        "device": str(device),
         "torch_threads": torch.get_num_threads(),
         "results": results,
         "samples_ms": {k: [round(x, 2) for x in v] for k, v in samples.items()},
     }
-    write_report("training_throughput", "training_throughput.py", report)
+    suffix = "" if device.type == "cpu" else f"_{device.type}"
+    write_report(f"training_throughput{suffix}", "training_throughput.py", report)
 
 
 def _version(package: str) -> str:

@@ -100,6 +100,8 @@ def _build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--target-return", type=float, metavar="R",
                     help="a DT checkpoint's target return at each episode's start (default 0, "
                     "the paper's)")  # fmt: skip
+    ev.add_argument("--device", help="where a DT or BC checkpoint runs: auto (the default, "
+                    "CUDA when present), cpu or cuda")  # fmt: skip
     ev.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     ev.add_argument(
         "--out",
@@ -308,12 +310,19 @@ def _command(args: argparse.Namespace) -> str:
 def _policy_kwargs(args: argparse.Namespace) -> dict:
     if args.noise and args.policy != "scripted":
         raise GcdtError("--noise applies only to --policy scripted")
+    checkpoint = args.policy not in POLICY_NAMES and not args.policy.startswith(TQC_PREFIX)
+    kwargs = {}
     target = getattr(args, "target_return", None)
     if target is not None:
-        if args.policy in POLICY_NAMES or args.policy.startswith(TQC_PREFIX):
+        if not checkpoint:
             raise GcdtError("--target-return applies only to a DT checkpoint (gcdt train)")
-        return {"target_return": target}
-    return {"noise_std": args.noise} if args.policy == "scripted" else {}
+        kwargs["target_return"] = target
+    device = getattr(args, "device", None)
+    if device is not None:
+        if not checkpoint:
+            raise GcdtError("--device applies only to a DT or BC checkpoint (gcdt train)")
+        kwargs["device"] = device
+    return {"noise_std": args.noise} if args.policy == "scripted" else kwargs
 
 
 def _report(dataset, path: Path | None, as_json: bool) -> None:

@@ -98,9 +98,19 @@ def method_label(method: str, goal_conditioning: str) -> str:
 
 
 def resolve_device(device: str) -> torch.device:
+    """`auto` (CUDA when present, else CPU), `cpu`, `cuda` or `cuda:N`, checked here so that
+    a wrong name or a missing GPU fails at once with a fix, not deep inside a run."""
     if device == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(device)
+    try:
+        resolved = torch.device(device)
+    except (RuntimeError, TypeError):
+        resolved = None
+    if resolved is None or resolved.type not in ("cpu", "cuda"):
+        raise GcdtError(f"unknown device {device!r}: use auto, cpu, cuda or cuda:N")
+    if resolved.type == "cuda" and not torch.cuda.is_available():
+        raise GcdtError(f"device {device!r}: this torch sees no CUDA GPU; use cpu or auto")
+    return resolved
 
 
 def build_model(method: str, model_config: dict[str, Any]) -> torch.nn.Module:
@@ -274,6 +284,9 @@ def train(
         schedule.load_state_dict(ckpt["schedule"])
         rng.bit_generator.state = ckpt["rng"]["numpy"]
         torch.set_rng_state(ckpt["rng"]["torch"])
+        if device.type == "cuda" and ckpt["rng"].get("cuda") is not None:
+            # Dropout on a GPU draws from the device's generator, not the CPU one.
+            torch.cuda.set_rng_state(ckpt["rng"]["cuda"], device)
         mean, std = ckpt["state_mean"].numpy(), ckpt["state_std"].numpy()
         step, history = ckpt["step"], ckpt["history"]
         window_loss, window_steps = ckpt["log_window"]
@@ -290,7 +303,8 @@ def train(
             "model_config": model_config, "model": model.state_dict(),
             "optimizer": optimizer.state_dict(), "schedule": schedule.state_dict(),
             "state_mean": torch.as_tensor(mean), "state_std": torch.as_tensor(std),
-            "rng": {"numpy": rng.bit_generator.state, "torch": torch.get_rng_state()},
+            "rng": {"numpy": rng.bit_generator.state, "torch": torch.get_rng_state(),
+                    "cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None},
             "step": step, "total_steps": total, "complete": complete, "history": history,
             "log_window": [window_loss, window_steps],
             "dataset": dataset.summary(), "created": utc_now(), "versions": package_versions(),

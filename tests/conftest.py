@@ -39,6 +39,16 @@ class AlternatingPolicy(Policy):
         return np.where((self.episodes_seen % 2 == 0)[:, None], act, 0.0).astype(np.float32)
 
 
+@pytest.fixture(autouse=True)
+def cpu_unless_marked_cuda(request, monkeypatch):
+    """Every test but those marked `cuda` sees no GPU, so that `device="auto"` means the CPU
+    and exact-equality tests hold on a GPU machine too; tests/test_cuda.py covers the GPU."""
+    if request.node.get_closest_marker("cuda") is None:
+        import torch
+
+        monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+
+
 @pytest.fixture
 def zero_policy():
     return ZeroPolicy("reach")

@@ -86,6 +86,10 @@ def test_evaluate_json_last_line(capsys):
             [*RANDOM_REACH, "--noise", "0.1"],
             "--noise applies only to --policy scripted",
         ),
+        (
+            [*RANDOM_REACH, "--device", "cpu"],
+            "--device applies only to a DT or BC checkpoint (gcdt train)",
+        ),
     ],
 )
 def test_bad_input_one_line_exit_2(assert_usage_error, args, message):

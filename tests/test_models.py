@@ -113,9 +113,12 @@ def test_only_the_requested_state_tokens_are_computed(model):
     torch.testing.assert_close(last, full[:, -1:], atol=1e-5, rtol=1e-5)
 
 
-def test_padding_rows_are_skipped_without_changing_the_training_gradient():
-    """The blocks skip the padding's rows; the inspector path computes every token. With
-    dropout 0 the masked loss and its gradients must agree, and padded outputs are zeros."""
+def test_padding_rows_are_skipped_without_changing_the_training_gradient(monkeypatch):
+    """On CPU the blocks skip the padding's rows; on a GPU they compute them (as here with
+    `_packs` off); the inspector path computes every token. With dropout 0 the masked loss
+    and its gradients must agree, and padded outputs are zeros on every path."""
+    import gcdt.models as models
+
     torch.manual_seed(0)
     net = GoalConditionedDT(DTConfig(state_dim=24, action_dim=3, context=6, dropout=0.0))
     net.train()
@@ -124,18 +127,23 @@ def test_padding_rows_are_skipped_without_changing_the_training_gradient():
     inputs["mask"][2, :5] = False  # one real step
     mask = inputs["mask"]
     results = []
-    for attention in (None, []):  # packed rows, then every token
+    for path in ("packed", "unpacked", "inspector"):
+        if path == "unpacked":
+            monkeypatch.setattr(models, "_packs", lambda real: False)
         net.zero_grad()
-        out = net(**inputs, attention=attention)
+        out = net(**inputs, attention=[] if path == "inspector" else None)
         torch.mean((out - inputs["actions"])[mask] ** 2).backward()
         grads = {n: p.grad.clone() for n, p in net.named_parameters() if p.grad is not None}
         results.append((out.detach(), grads))
-    (packed, g_packed), (dense, g_dense) = results
-    assert packed[~mask].abs().max() == 0 and dense[~mask].abs().max() == 0
-    torch.testing.assert_close(packed[mask], dense[mask], atol=1e-5, rtol=1e-5)
-    assert g_packed.keys() == g_dense.keys() and len(g_packed) == len(list(net.parameters()))
-    for name in g_packed:
-        torch.testing.assert_close(g_packed[name], g_dense[name], atol=1e-5, rtol=1e-4)
+        monkeypatch.undo()
+    packed, g_packed = results[0]
+    assert len(g_packed) == len(list(net.parameters()))
+    for out, grads in results:
+        assert out[~mask].abs().max() == 0
+        torch.testing.assert_close(out[mask], packed[mask], atol=1e-5, rtol=1e-5)
+        assert grads.keys() == g_packed.keys()
+        for name in grads:
+            torch.testing.assert_close(grads[name], g_packed[name], atol=1e-5, rtol=1e-4)
 
 
 def test_cpu_training_path_equals_sdpa_without_dropout():

@@ -141,6 +141,8 @@ def test_checkpoint_policy_matches_model_and_cli(reach_expert_data, tmp_path, ca
     ckpt_arg = ["--policy", str(out / "checkpoint.pt"), "--task", "reach", "--reward", "sparse"]
     assert main(["evaluate", *ckpt_arg, "--episodes", "3", "--json", "--no-progress"]) == 0
     assert '"policy": "gcdt"' in capsys.readouterr().out
+    assert main(["evaluate", *ckpt_arg, "--episodes", "1", "--device", "tpu"]) == 2
+    assert "unknown device 'tpu': use auto, cpu, cuda or cuda:N" in capsys.readouterr().err
 
     # Batched rollouts equal one-env rollouts: the per-env context is really per env.
     policy = TrainedPolicy(out / "checkpoint.pt")
@@ -179,3 +181,12 @@ def test_cli_train_refuses_other_task(make_dataset, tmp_path, capsys):
     assert code == 2
     assert "holds 'push' data, not 'reach'" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_unknown_or_missing_device_fails_before_anything_is_written(make_dataset, tmp_path):
+    ds = make_dataset("reach", lengths=(10, 10))
+    with pytest.raises(GcdtError, match="unknown device 'tpu': use auto, cpu, cuda or cuda:N"):
+        train(ds, TrainConfig(steps=2, device="tpu"), tmp_path / "a", progress=False)
+    with pytest.raises(GcdtError, match="this torch sees no CUDA GPU; use cpu or auto"):
+        train(ds, TrainConfig(steps=2, device="cuda"), tmp_path / "b", progress=False)  # conftest
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

@@ -4,11 +4,15 @@ The DT keeps a rolling, left-padded K-step context per env. Each episode starts 
 target return-to-go (0 by default, as in the paper: "reach the goal with no further
 penalty") divided by the return scale, and every reward the env returns is subtracted
 (divided by the same scale) before the next prediction.
+
+A policy runs on the GPU when one is present (`device="auto"`). There the DT's forward pass
+over the whole K-step window is captured once per `reset` in a CUDA graph and replayed each
+step: at this model's size a GPU step costs its kernel launches, not its arithmetic.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +23,7 @@ from gcdt.envs import goal_state
 from gcdt.errors import GcdtError
 from gcdt.models import state_columns
 from gcdt.policies.base import Policy
-from gcdt.training import build_model, load_checkpoint, method_label
+from gcdt.training import build_model, load_checkpoint, method_label, resolve_device
 
 
 class TrainedPolicy(Policy):
@@ -31,7 +35,7 @@ class TrainedPolicy(Policy):
         task: str | None = None,
         *,
         target_return: float = 0.0,
-        device: str = "cpu",
+        device: str = "auto",
     ) -> None:
         ckpt = checkpoint if isinstance(checkpoint, dict) else load_checkpoint(checkpoint)
         self.path = None if isinstance(checkpoint, dict) else str(checkpoint)
@@ -46,7 +50,7 @@ class TrainedPolicy(Policy):
         self.cols = state_columns(self.task, cfg["goal_conditioning"])
         self.scale = float(cfg["return_scale"])
         self.target_return = float(target_return)
-        self.device = torch.device(device)
+        self.device = resolve_device(device)
         try:
             self.model = build_model(self.method, ckpt["model_config"])
             self.model.load_state_dict(ckpt["model"])
@@ -71,6 +75,7 @@ class TrainedPolicy(Policy):
         self.timesteps = torch.zeros(n_envs, k, dtype=torch.long, device=self.device)
         self.mask = torch.zeros(n_envs, k, dtype=torch.bool, device=self.device)
         self.t = np.zeros(n_envs, dtype=np.int64)
+        self.graph: tuple[torch.cuda.CUDAGraph, torch.Tensor] | None = None  # (graph, output)
 
     @torch.no_grad()
     def predict(
@@ -89,20 +94,31 @@ class TrainedPolicy(Policy):
         )
         self.t = np.where(episode_start, 0, self.t + 1)
         for buf in (self.states, self.actions, self.rtg, self.timesteps, self.mask):
-            buf[start] = 0  # a new episode forgets the old context
+            # A new episode forgets the old context (masked_fill: no host sync on a GPU).
+            buf.masked_fill_(start.view(-1, *[1] * (buf.dim() - 1)), 0)
             buf[:] = torch.roll(buf, -1, dims=1)  # make room for the new step on the right
         self.states[:, -1] = state_t
         self.actions[:, -1] = 0.0  # placeholder: the state token comes first, it cannot see it
         self.rtg[:, -1, 0] = rtg
         self.timesteps[:, -1] = torch.as_tensor(np.minimum(self.t, self.max_t), device=self.device)
         self.mask[:, -1] = True
-        # Steps that are padding in every env hold nothing a real token may attend to: leave
-        # them out (exact). Early in an episode most of the window is such padding.
-        first = self.k - int(self.mask.sum(dim=1).max())
-        window = (b[:, first:] for b in (self.states, self.actions, self.rtg, self.timesteps))
-        action = self.model(*window, self.mask[:, first:], steps=slice(-1, None))[:, 0]
+        action = self._act()
         self.actions[:, -1] = action
         return action.cpu().numpy().astype(np.float32)
+
+    def _act(self) -> torch.Tensor:
+        """The newest state tokens' actions `[n_envs, action_dim]` from the context buffers."""
+        window = (self.states, self.actions, self.rtg, self.timesteps, self.mask)
+        if self.device.type == "cpu":
+            # Steps that are padding in every env hold nothing a real token may attend to:
+            # leave them out (exact). Early in an episode most of the window is such padding.
+            first = self.k - int(self.mask.sum(dim=1).max())
+            return self.model(*(b[:, first:] for b in window), steps=slice(-1, None))[:, 0]
+        if self.graph is None:  # the buffers are the graph's inputs, updated in place
+            self.graph = _capture(lambda: self.model(*window, steps=slice(-1, None))[:, 0])
+        graph, action = self.graph
+        graph.replay()
+        return action.clone()
 
     @torch.no_grad()
     def attention(self, env: int = 0) -> np.ndarray:
@@ -127,3 +143,18 @@ class TrainedPolicy(Policy):
             "trained_steps": self.trained_steps,
             "target_return": self.target_return,
         }
+
+
+def _capture(forward: Callable[[], torch.Tensor]) -> tuple[torch.cuda.CUDAGraph, torch.Tensor]:
+    """`forward` captured in a CUDA graph, after warm-up runs on a side stream (which pick
+    the kernels and allocate their workspaces, as capture requires); (graph, its output)."""
+    stream = torch.cuda.Stream()
+    stream.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(stream):
+        for _ in range(2):
+            forward()
+    torch.cuda.current_stream().wait_stream(stream)
+    graph = torch.cuda.CUDAGraph()
+    with torch.cuda.graph(graph):
+        output = forward()
+    return graph, output

@@ -192,17 +192,19 @@ def main() -> None:
 
         samples: dict[str, list[float]] = {f"predict_in_loop_ms_{n}_envs": []}
 
-        def run(policy: Any, n_envs: int, timesteps: int) -> float:
+        def run(policy: Any, n_envs: int, timesteps: int, in_loop: str | None = None) -> float:
+            """Steps/s of `evaluate`; with `in_loop`, also the policy's ms per vector step
+            appended to that sample list."""
             timed = _Timed(policy)
             result = evaluate(timed, task, "sparse", timesteps=timesteps, n_envs=n_envs,
                               progress=False)  # fmt: skip
-            if n_envs == n and policy.name != "random":
-                vector_steps = -(-timesteps // n_envs)
-                samples[f"predict_in_loop_ms_{n}_envs"].append(1e3 * timed.seconds / vector_steps)
+            if in_loop is not None:
+                samples[in_loop].append(1e3 * timed.seconds / -(-timesteps // n_envs))
             return result.summary["steps_per_second"]
 
         def gcdt(n_envs: int, timesteps: int) -> float:
-            return run(TrainedPolicy(path, task, device=device), n_envs, timesteps)
+            in_loop = f"predict_in_loop_ms_{n}_envs" if n_envs == n else None
+            return run(TrainedPolicy(path, task, device=device), n_envs, timesteps, in_loop)
 
         cells: dict[str, Callable[[], float]] = {
             f"raw_vector_{n}_envs": lambda: raw_vector(task, args.timesteps, n),

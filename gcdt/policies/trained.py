@@ -115,10 +115,11 @@ class TrainedPolicy(Policy):
             first = self.k - int(self.mask.sum(dim=1).max())
             return self.model(*(b[:, first:] for b in window), steps=slice(-1, None))[:, 0]
         if self.graph is None:  # the buffers are the graph's inputs, updated in place
-            self.graph = _capture(lambda: self.model(*window, steps=slice(-1, None))[:, 0])
+            forward = lambda: self.model(*window, steps=slice(-1, None))[:, 0]  # noqa: E731
+            self.graph = _capture(forward, self.device)
         graph, action = self.graph
         graph.replay()
-        return action.clone()
+        return action  # the graph's output buffer: `predict` copies it before the next replay
 
     @torch.no_grad()
     def attention(self, env: int = 0) -> np.ndarray:
@@ -145,16 +146,20 @@ class TrainedPolicy(Policy):
         }
 
 
-def _capture(forward: Callable[[], torch.Tensor]) -> tuple[torch.cuda.CUDAGraph, torch.Tensor]:
-    """`forward` captured in a CUDA graph, after warm-up runs on a side stream (which pick
-    the kernels and allocate their workspaces, as capture requires); (graph, its output)."""
-    stream = torch.cuda.Stream()
-    stream.wait_stream(torch.cuda.current_stream())
-    with torch.cuda.stream(stream):
-        for _ in range(2):
-            forward()
-    torch.cuda.current_stream().wait_stream(stream)
-    graph = torch.cuda.CUDAGraph()
-    with torch.cuda.graph(graph):
-        output = forward()
+def _capture(
+    forward: Callable[[], torch.Tensor], device: torch.device
+) -> tuple[torch.cuda.CUDAGraph, torch.Tensor]:
+    """`forward` captured in a CUDA graph on `device`, after warm-up runs on a side stream
+    (which pick the kernels and allocate their workspaces, as capture requires); (graph, its
+    output). Streams and graph belong to `device`, not to whichever GPU is current."""
+    with torch.cuda.device(device):
+        stream = torch.cuda.Stream()
+        stream.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(stream):
+            for _ in range(2):
+                forward()
+        torch.cuda.current_stream().wait_stream(stream)
+        graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(graph):
+            output = forward()
     return graph, output

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from gcdt.data import load_dataset
 from gcdt.errors import GcdtError
 from gcdt.experiments import (
     PROFILES,
@@ -60,8 +61,21 @@ def test_paper_profile_is_the_paper_and_others_list_their_deviations():
     smoke = deviations_text(get_profile("smoke"))
     assert "evaluation over 100 env steps instead of 10,000" in smoke
     assert "learning rate 0.001 instead of 0.0001" in quick
+    assert "actions with Gaussian noise of std 0.2" in quick
     with pytest.raises(GcdtError, match="unknown profile 'huge'"):
         get_profile("huge")
+
+
+def test_expert_noise_reaches_the_scripted_collections_only():
+    mixture = next(e.spec.data for e in build_grid(get_profile("quick"), only="rq5")
+                   if e.spec.data.expert_ratio == 0.5)  # fmt: skip
+    assert mixture.expert_noise == mixture.base("expert").expert_noise == 0.2
+    assert mixture.base("random").expert_noise == 0.0  # random actions take no expert noise
+    assert dataclasses.replace(mixture, expert_noise=0.0).key() != mixture.key()
+    with pytest.raises(GcdtError, match="expert_noise applies to the scripted experts only"):
+        dataclasses.replace(PROFILES["paper"], expert_noise=0.1)
+    with pytest.raises(GcdtError, match="expert_noise must be >= 0"):
+        dataclasses.replace(SMOKE, expert_noise=-0.1)
 
 
 def test_paper_grid_shares_runs_between_sections():
@@ -120,6 +134,13 @@ def test_local_sweep_runs_every_run_once(local_sweep):
     # One expert and one random collection, two derived datasets, all content-keyed.
     datasets = list((root / "artifacts" / "grid" / "datasets").glob("*.npz"))
     assert len(datasets) == 4
+    # The collections used the profile's expert noise; random actions got none.
+    policies = {}
+    for path in datasets:
+        metadata = load_dataset(path).metadata
+        if metadata["source"] == "collect":  # not a subset or mixture
+            policies[metadata["policy"]["name"]] = metadata["policy"].get("noise_std")
+    assert policies == {"scripted": TINY.expert_noise, "random": None} and TINY.expert_noise > 0
     # Every offline run trained at the profile's learning rate, not the trainer's default.
     checkpoints = list((root / "artifacts" / "grid" / "checkpoints").glob("*/checkpoint.pt"))
     assert len(checkpoints) == 6

@@ -84,7 +84,8 @@ def _collect(spec: DataSpec) -> Dataset:
         policy = make_policy(f"tqc:{tqc_agent(spec.expert_tqc)}", spec.task)
         reward = spec.expert_tqc.reward
     else:
-        policy, reward = make_policy(spec.expert, spec.task), "sparse"
+        noise = {"noise_std": spec.expert_noise} if spec.expert_noise else {}  # scripted only
+        policy, reward = make_policy(spec.expert, spec.task, **noise), "sparse"
     return collect(policy, spec.task, spec.base_size, seed=spec.seed, n_envs=spec.collect_envs,
                    reward=reward, progress=False)  # fmt: skip
 

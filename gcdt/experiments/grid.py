@@ -17,7 +17,8 @@ from typing import Any
 from gcdt.experiments.profiles import Profile
 
 #: Bump when the meaning of a spec field or of a result file changes: old results re-run.
-RUN_SCHEMA = 2
+#: 3: data specs name the scripted experts' action noise.
+RUN_SCHEMA = 3
 SECTIONS = ("table1", "rq4", "rq5", "ablation")
 #: Method name -> (trainer method, goal conditioning); `tqc` is the online baseline.
 OFFLINE_METHODS = {
@@ -65,6 +66,7 @@ class DataSpec:
     expert_ratio: float
     expert: str  # "scripted" or "tqc"
     expert_tqc: TQCSpec | None  # the TQC agent when expert == "tqc"
+    expert_noise: float  # action noise std of the scripted expert while collecting
     base_size: int
     seed: int
     collect_envs: int
@@ -85,7 +87,8 @@ class DataSpec:
         """The `"expert"` or `"random"` collection that this data is drawn from."""
         if kind == "random":
             return dataclasses.replace(self, size=self.base_size, expert_ratio=0.0,
-                                       expert="random", expert_tqc=None)  # fmt: skip
+                                       expert="random", expert_tqc=None,
+                                       expert_noise=0.0)  # fmt: skip
         return dataclasses.replace(self, size=self.base_size, expert_ratio=1.0)
 
 
@@ -161,7 +164,8 @@ def expert_tqc_spec(profile: Profile, task: str) -> TQCSpec:
 def data_spec(profile: Profile, task: str, size: int, expert_ratio: float) -> DataSpec:
     expert_tqc = expert_tqc_spec(profile, task) if profile.expert == "tqc" else None
     return DataSpec(task, int(size), float(expert_ratio), profile.expert, expert_tqc,
-                    profile.dataset_size, profile.data_seed, profile.collect_envs)  # fmt: skip
+                    float(profile.expert_noise), profile.dataset_size, profile.data_seed,
+                    profile.collect_envs)  # fmt: skip
 
 
 def run_spec(profile: Profile, method: str, task: str, reward: str, seed: int,

@@ -104,7 +104,7 @@ QUICK = dataclasses.replace(
     # paper's target return 0 succeeded in 82.2 % of PickAndPlace sparse episodes on held-out
     # seeds: a return-to-go near 0 marks the carrying phase there, and it shut the gripper
     # before grasping. With noise std 0.1 / 0.2 it succeeds in 90.7 / 95.5 % (Push: 95.5 /
-    # 95.6 %, noise-free 96.1 %); the experts then succeed in 99 / 97 % (PickAndPlace) and
+    # 95.6 %, noise-free 96.0 %); the experts then succeed in 99 / 97 % (PickAndPlace) and
     # 96 / 92 % (Push) of their episodes (results/quick_checks/README.md).
     expert_noise=0.2,
     dataset_size=20_000,

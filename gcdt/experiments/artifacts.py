@@ -14,10 +14,14 @@ import contextlib
 import fcntl
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from gcdt.data import Dataset, collect, load_dataset, mix, subset
 from gcdt.experiments.grid import DataSpec, RunSpec, TQCSpec
 from gcdt.paths import artifacts_dir
+
+if TYPE_CHECKING:
+    from gcdt.policies import Policy
 
 
 def grid_dir() -> Path:
@@ -77,15 +81,18 @@ def dataset(spec: DataSpec) -> Dataset:
     return made
 
 
-def _collect(spec: DataSpec) -> Dataset:
+def collecting_policy(spec: DataSpec) -> tuple[Policy, str]:
+    """The policy that collects base dataset `spec`, and the reward type it is shown."""
     from gcdt.policies import make_policy
 
     if spec.expert == "tqc":
-        policy = make_policy(f"tqc:{tqc_agent(spec.expert_tqc)}", spec.task)
-        reward = spec.expert_tqc.reward
-    else:
-        noise = {"noise_std": spec.expert_noise} if spec.expert_noise else {}  # scripted only
-        policy, reward = make_policy(spec.expert, spec.task, **noise), "sparse"
+        return make_policy(f"tqc:{tqc_agent(spec.expert_tqc)}", spec.task), spec.expert_tqc.reward
+    noise = {"noise_std": spec.expert_noise} if spec.expert_noise else {}  # scripted only
+    return make_policy(spec.expert, spec.task, **noise), "sparse"
+
+
+def _collect(spec: DataSpec) -> Dataset:
+    policy, reward = collecting_policy(spec)
     return collect(policy, spec.task, spec.base_size, seed=spec.seed, n_envs=spec.collect_envs,
                    reward=reward, progress=False)  # fmt: skip
 

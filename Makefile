@@ -8,9 +8,11 @@ BENCH_STAMP := $(VENV)/.gcdt-bench-installed
 PYTEST_ARGS ?=
 PROFILE ?= quick
 BACKEND ?= local
+# A reproduction's own results and figures: never the published results/ and figures/.
+REPRO_DIR ?= $(or $(GCDT_ARTIFACTS),artifacts)/reproduce
 NOTEBOOKS := $(sort $(wildcard notebooks/[0-9]*.ipynb))
 
-.PHONY: install test lint bench bench-tqc reproduce figures lab clean help
+.PHONY: install test lint bench bench-tqc reproduce publish figures lab clean help
 
 help:
 	@echo "make install    create $(VENV) from environment/ (no-op when up to date)"
@@ -18,8 +20,10 @@ help:
 	@echo "make lint       ruff over gcdt/, tests/ and benchmarks/"
 	@echo "make bench      throughput benchmarks -> results/bench/*.json"
 	@echo "make bench-tqc  TQC+HER trained on Reach to success -> results/bench/tqc_her_reach.json"
-	@echo "make reproduce  [PROFILE=smoke|quick|paper] [BACKEND=local|ray]: the notebooks in order,"
-	@echo "                then every table (results/PROFILE/) and figure (figures/PROFILE/)"
+	@echo "make reproduce  PROFILE=smoke|quick|paper (default quick, ~1 h on 2 cores) [BACKEND=local|ray]:"
+	@echo "                re-run the grid and every notebook into $(REPRO_DIR)/, then check"
+	@echo "                the results against the published ones (results/PROFILE/)"
+	@echo "make publish    (maintainers) make that reproduction the published results/ and figures/"
 	@echo "make figures    [PROFILE=...] re-render tables and figures from results/PROFILE/runs/"
 	@echo "make lab        JupyterLab with the project's kernel"
 	@echo "make clean      remove caches (keeps $(VENV) and artifacts/)"
@@ -32,9 +36,12 @@ $(STAMP): environment/requirements.txt pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -r environment/requirements.txt
 	$(PY) -m pip install --quiet --no-deps -e .
+	@# The notebooks name this kernel: papermill, nbval and JupyterLab find it in the venv.
+	$(PY) -m ipykernel install --sys-prefix --name gcdt --display-name "gcdt (.venv)" > /dev/null
 	@touch $@
 
 test: install
+	@echo "make test: the suite, then every notebook (nbval); about 15-20 min on 2 cores"
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 lint: install
@@ -64,27 +71,39 @@ bench-tqc: install
 	$(PY) benchmarks/tqc_her.py reach
 	$(PY) benchmarks/summary.py --readme
 
-# The notebooks in order, executed by papermill into build/ (git-ignored); tables and
-# figures land in results/$(PROFILE)/ and figures/$(PROFILE)/.
+# Re-run the profile: the grid's runs, then the notebooks in order (papermill), with results,
+# figures and executed notebooks in $(REPRO_DIR) (finished runs there are resumed, the published ones never
+# count); then the tables and figures, and the check against the published results/PROFILE/.
 reproduce: install
-	@$(VENV)/bin/gcdt sweep --profile $(PROFILE) --backend $(BACKEND) --dry-run > /dev/null
-	@mkdir -p build/notebooks/$(PROFILE)
-	@started=$$(date +%s); \
+	@export GCDT_OUTPUTS="$(abspath $(REPRO_DIR))"; \
+	$(VENV)/bin/gcdt sweep --profile $(PROFILE) --backend $(BACKEND) --dry-run > /dev/null || exit 2; \
+	mkdir -p "$$GCDT_OUTPUTS/notebooks/$(PROFILE)"; \
+	echo "Reproducing profile $(PROFILE) into $$GCDT_OUTPUTS"; \
+	started=$$(date +%s); \
+	$(VENV)/bin/gcdt sweep --profile $(PROFILE) --backend $(BACKEND) || exit 1; \
 	for nb in $(NOTEBOOKS); do \
 	  echo "== $$nb ($(PROFILE), $(BACKEND))"; \
-	  $(PY) -m papermill --cwd notebooks --log-level WARNING -p profile $(PROFILE) \
-	    -p backend $(BACKEND) $$nb build/notebooks/$(PROFILE)/$$(basename $$nb) || exit 1; \
+	  $(PY) -m papermill --engine gcdt --cwd notebooks --log-level WARNING $$([ -t 1 ] || echo --no-progress-bar) \
+	    -p profile $(PROFILE) \
+	    -p backend $(BACKEND) $$nb "$$GCDT_OUTPUTS/notebooks/$(PROFILE)/$$(basename $$nb)" || exit 1; \
 	done; \
 	$(VENV)/bin/gcdt report --profile $(PROFILE) --backend $(BACKEND) \
-	  --wall-seconds $$(( $$(date +%s) - started ))
+	  --wall-seconds $$(( $$(date +%s) - started )) > /dev/null || exit 1; \
+	$(VENV)/bin/gcdt compare --profile $(PROFILE)
+
+# Maintainers: make the finished reproduction in $(REPRO_DIR) the published results/PROFILE/
+# and figures/PROFILE/, and regenerate README.md's results from them.
+publish: install
+	$(VENV)/bin/gcdt publish --profile $(PROFILE) --from $(REPRO_DIR)
+	env -u GCDT_OUTPUTS $(VENV)/bin/gcdt report --profile $(PROFILE) --readme
 
 # Re-render the tables and figures from results/$(PROFILE)/runs/ alone.
 figures: install
-	$(VENV)/bin/gcdt report --profile $(PROFILE)
+	env -u GCDT_OUTPUTS $(VENV)/bin/gcdt report --profile $(PROFILE)
 
+# Containers run as root, which JupyterLab refuses without --allow-root.
 lab: install
-	$(PY) -m ipykernel install --user --name gcdt --display-name "gcdt (.venv)"
-	$(VENV)/bin/jupyter lab notebooks/
+	$(VENV)/bin/jupyter lab notebooks/ $(if $(filter 0,$(shell id -u)),--allow-root)
 
 clean:
 	rm -rf .pytest_cache .ruff_cache build *.egg-info

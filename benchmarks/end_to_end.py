@@ -27,9 +27,9 @@ from common import write_report
 
 from gcdt.experiments import get_profile, plan
 from gcdt.experiments.costs import CostModel
-from gcdt.experiments.store import RunStore, results_dir
+from gcdt.experiments.store import RunStore
 from gcdt.experiments.sweep import default_workers, shared_cost
-from gcdt.paths import ARTIFACTS_ENV, REPO_ROOT
+from gcdt.paths import ARTIFACTS_ENV, REPO_ROOT, results_dir
 
 
 def smoke_reproduce() -> float:

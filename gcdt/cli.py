@@ -18,7 +18,7 @@ from gcdt.errors import GcdtError
 from gcdt.experiments.grid import SECTIONS
 from gcdt.experiments.profiles import PROFILES
 from gcdt.experiments.sweep import BACKENDS
-from gcdt.paths import write_json_atomic
+from gcdt.paths import check_writable, write_json_atomic
 from gcdt.policies import POLICY_NAMES, POLICY_SPECS, TQC_PREFIX
 
 USAGE_ERROR = 2
@@ -203,6 +203,9 @@ def _build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--device", default="auto", help="auto (CUDA when present), cpu, cuda")
     tr.add_argument("--bf16", action="store_true", help="bfloat16 autocast")
     tr.add_argument("--resume", action="store_true", help="continue from --out/checkpoint.pt")
+    tr.add_argument("--checkpoint-seconds", type=float, metavar="S",
+                    help="checkpoint (and write train_log.csv) at least every S seconds, as well "
+                    "as every 1000 steps (default 30)")  # fmt: skip
     tr.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     tr.set_defaults(run=_train)
 
@@ -265,6 +268,31 @@ def _build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--backend", default="local", choices=list(BACKENDS),
                     help="the backend of that `make reproduce` (with --wall-seconds)")  # fmt: skip
     rp.set_defaults(run=_report_cmd)
+
+    cmp = sub.add_parser(
+        "compare",
+        help="check a reproduction against the published results",
+        description="For every Table 1 cell, ablation cell and Fig. 3/4 point: the published "
+        "value and its 95 % interval, yours, the difference, and whether yours lies inside. "
+        "Writes results/PROFILE/reproduction_check.{csv,md} under --ours.",
+    )
+    cmp.add_argument("--profile", required=True, choices=list(PROFILES))
+    cmp.add_argument("--ours", type=Path, metavar="DIR", help="the reproduction's folder, "
+                     "holding results/PROFILE/runs/ (default: $GCDT_OUTPUTS, else "
+                     "artifacts/reproduce)")  # fmt: skip
+    cmp.set_defaults(run=_compare)
+
+    pb = sub.add_parser(
+        "publish",
+        help="(maintainers) make a finished reproduction the published results",
+        description="Mirror results/PROFILE/ and figures/PROFILE/ of a finished reproduction "
+        "into the repository's; unchanged files are left untouched.",
+    )
+    pb.add_argument("--profile", required=True, choices=list(PROFILES))
+    pb.add_argument("--from", dest="source", type=Path, metavar="DIR",
+                    help="the reproduction's folder (default: $GCDT_OUTPUTS, else "
+                    "artifacts/reproduce)")  # fmt: skip
+    pb.set_defaults(run=_publish)
     return parser
 
 
@@ -272,6 +300,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     from gcdt.evaluation import evaluate
     from gcdt.policies import make_policy
 
+    if args.out is not None:
+        check_writable(args.out)  # before the run, not after it
     policy = make_policy(args.policy, args.task, **_policy_kwargs(args))
     result = evaluate(
         policy,
@@ -346,6 +376,7 @@ def _collect(args: argparse.Namespace) -> int:
     from gcdt.data import collect
     from gcdt.policies import make_policy
 
+    check_writable(args.out)  # before the collection, not after it
     policy = make_policy(args.policy, args.task, **_policy_kwargs(args))
     dataset = collect(
         policy,
@@ -376,6 +407,7 @@ def _dataset_info(args: argparse.Namespace) -> int:
 def _dataset_mix(args: argparse.Namespace) -> int:
     from gcdt.data import load_dataset, mix
 
+    check_writable(args.out)
     mixed = mix(
         load_dataset(args.expert), load_dataset(args.random), args.ratio, args.size, args.seed
     )
@@ -386,6 +418,7 @@ def _dataset_mix(args: argparse.Namespace) -> int:
 def _dataset_subset(args: argparse.Namespace) -> int:
     from gcdt.data import load_dataset, subset
 
+    check_writable(args.out)
     part = subset(load_dataset(args.path), args.size, args.seed)
     _report(part, part.save(args.out), False)
     return 0
@@ -405,6 +438,7 @@ def _dataset_export_minari(args: argparse.Namespace) -> int:
 def _dataset_import_minari(args: argparse.Namespace) -> int:
     from gcdt.data import import_minari
 
+    check_writable(args.out)
     dataset = import_minari(args.id)
     _report(dataset, dataset.save(args.out), False)
     return 0
@@ -413,6 +447,7 @@ def _dataset_import_minari(args: argparse.Namespace) -> int:
 def _dataset_import_authors(args: argparse.Namespace) -> int:
     from gcdt.data import import_authors
 
+    check_writable(args.out)
     dataset = import_authors(args.pickle, trust_pickle=args.trust_pickle, task=args.task)
     _report(dataset, dataset.save(args.out), False)
     return 0
@@ -422,9 +457,12 @@ def _train(args: argparse.Namespace) -> int:
     from gcdt.data import load_dataset
     from gcdt.training import TrainConfig, train
 
+    check_writable(args.out, folder=True)
     dataset = load_dataset(args.dataset)
     if args.task is not None and dataset.task != args.task:
         raise GcdtError(f"{args.dataset} holds {dataset.task!r} data, not {args.task!r}")
+    given = {"checkpoint_seconds": args.checkpoint_seconds}
+    schedule = {k: v for k, v in given.items() if v is not None}  # else TrainConfig's default
     cfg = TrainConfig(
         method=args.method,
         goal_conditioning=args.goal_conditioning,
@@ -437,6 +475,7 @@ def _train(args: argparse.Namespace) -> int:
         seed=args.seed,
         device=args.device,
         bf16=args.bf16,
+        **schedule,
     )
     result = train(dataset, cfg, args.out, resume=args.resume, progress=not args.no_progress)
     print(
@@ -449,6 +488,7 @@ def _train(args: argparse.Namespace) -> int:
 def _tqc_train(args: argparse.Namespace) -> int:
     from gcdt.baselines.tqc_her import load_tqc_config, train_tqc
 
+    check_writable(args.out, folder=True)
     cfg = load_tqc_config(args.config, args.task)
     if args.steps is not None:
         cfg = cfg.with_budget(steps=args.steps)
@@ -528,6 +568,41 @@ def _report_cmd(args: argparse.Namespace) -> int:
     if args.readme:
         update_readme(profile, REPO_ROOT / "README.md")
         print("README.md")
+    return 0
+
+
+def _reproduction_dir(given: Path | None) -> Path:
+    """A reproduction's folder: the one given, else $GCDT_OUTPUTS, else artifacts/reproduce."""
+    import os
+
+    from gcdt.paths import OUTPUTS_ENV, artifacts_dir
+
+    folder = given or Path(os.environ.get(OUTPUTS_ENV) or artifacts_dir() / "reproduce")
+    if not folder.is_dir():
+        raise GcdtError(f"{folder} does not exist: run `make reproduce` first, or give its folder")
+    return folder
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from gcdt.experiments import get_profile
+    from gcdt.report.reproduction import write_check
+
+    text, path = write_check(get_profile(args.profile), _reproduction_dir(args.ours))
+    print(text.rstrip())
+    if path is not None:
+        print(f"\n(written to {path})")
+    return 0
+
+
+def _publish(args: argparse.Namespace) -> int:
+    from gcdt.experiments import get_profile
+    from gcdt.paths import REPO_ROOT
+    from gcdt.report.reproduction import publish
+
+    written = publish(get_profile(args.profile), _reproduction_dir(args.source))
+    for path in written:
+        print(path.relative_to(REPO_ROOT))
+    print(f"published {args.profile}: {len(written)} file(s) changed")
     return 0
 
 

@@ -92,17 +92,18 @@ def env_id(task: str, reward: str) -> str:
 
 
 @contextlib.contextmanager
-def _native_stdout_silenced() -> Iterator[None]:
-    """Drop what C code prints to fd 1 (pybullet's banner and argv dump on every connect).
+def _native_output_silenced(fd: int = 1) -> Iterator[None]:
+    """Drop what C code writes to file descriptor `fd` (1: C stdout, 2: C stderr) meanwhile.
 
-    Python-level `sys.stdout` redirection cannot catch printf from C, and a JSON line printed
-    by the CLI must stay the last line of stdout, so the file descriptor itself is swapped.
+    pybullet prints its build time to fd 2 when its module initialises and its connection
+    arguments (`argv[0]=...`) to fd 1 on every connect. Python-level redirection cannot catch
+    printf from C, and a JSON line printed by the CLI must stay the last line of stdout, so the
+    descriptor itself is swapped. By number, not `sys.stdout.fileno()`: in a Jupyter kernel that
+    is a copy of the kernel's original stdout, while fd 1 is the pipe shown in the notebook.
     """
-    try:
-        fd = sys.stdout.fileno()
-    except (AttributeError, OSError, ValueError):  # e.g. pytest capture or a notebook
-        fd = 1
-    sys.stdout.flush()
+    stream = sys.stdout if fd == 1 else sys.stderr
+    if stream is not None:
+        stream.flush()  # what Python wrote before stays visible
     saved = os.dup(fd)
     try:
         with open(os.devnull, "w") as devnull:
@@ -110,7 +111,7 @@ def _native_stdout_silenced() -> Iterator[None]:
             try:
                 yield
             finally:
-                ctypes.CDLL(None).fflush(None)  # flush C stdio while fd 1 is still /dev/null
+                ctypes.CDLL(None).fflush(None)  # flush C stdio while fd is still /dev/null
                 os.dup2(saved, fd)
     finally:
         os.close(saved)
@@ -118,7 +119,9 @@ def _native_stdout_silenced() -> Iterator[None]:
 
 @functools.cache
 def _register_panda_envs() -> None:
-    with _native_stdout_silenced():
+    with _native_output_silenced(2):  # only pybullet's module init runs here: its banner
+        import pybullet  # noqa: F401
+    with _native_output_silenced(1):
         import panda_gym  # noqa: F401  (registers the Panda*-v3 ids with gymnasium)
 
 
@@ -131,7 +134,7 @@ def make_env(task: str, reward: str, *, render_mode: str = "rgb_array", **kwargs
     """
     eid = env_id(task, reward)
     _register_panda_envs()
-    with _native_stdout_silenced():
+    with _native_output_silenced(1):  # construction connects to pybullet; stepping is not hidden
         return gym.make(eid, render_mode=render_mode, disable_env_checker=True, **kwargs)
 
 

@@ -11,17 +11,19 @@ envs in the order they free up, so a run is deterministic for a given `seed` and
 
 from __future__ import annotations
 
+import io
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from gcdt.envs import check_reward, episode_seed, get_task, goal_distance, make_env
 from gcdt.errors import GcdtError
+from gcdt.paths import write_if_changed
 from gcdt.policies.base import Policy
+from gcdt.progress import progress_bar
 from gcdt.rollout import VectorRollout
 
 DEFAULT_TIMESTEPS = 10_000  # the paper's evaluation budget per (run, seed)
@@ -119,11 +121,11 @@ def evaluate(
     records: list[EpisodeRecord] = []
     started = time.perf_counter()
     counted = 0
-    bar = tqdm(
+    bar = progress_bar(
         total=timesteps if episodes is None else episodes,
         unit="step" if episodes is None else "episode",
         desc=f"evaluate {policy.name} on {task}/{reward}",
-        disable=not progress,
+        progress=progress,
         leave=False,
     )
     ep_return = np.zeros(n_envs)
@@ -225,19 +227,11 @@ def record_rollout(
     finally:
         env.close()
     if path is not None:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
-        tmp = path.with_name(path.name + ".tmp")
-        images[0].save(
-            tmp,
-            format="GIF",
-            save_all=True,
-            append_images=images[1:],
-            duration=int(1000 / fps),
-            loop=0,
-        )
-        tmp.replace(path)  # atomic: never a half-written GIF under the final name
+        gif = io.BytesIO()
+        images[0].save(gif, format="GIF", save_all=True, append_images=images[1:],
+                       duration=int(1000 / fps), loop=0)  # fmt: skip
+        write_if_changed(path, gif.getvalue())  # atomic; an unchanged GIF is left untouched
     return frames
 
 

@@ -17,9 +17,7 @@ import csv
 import ctypes
 import functools
 import math
-import os
 import platform
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -27,12 +25,13 @@ from typing import Any, Literal
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from gcdt.data.dataset import Dataset
 from gcdt.envs import check_reward
 from gcdt.errors import GcdtError
 from gcdt.models import BCConfig, BCPolicyNet, DTConfig, GoalConditionedDT, state_columns
+from gcdt.paths import atomic_write
+from gcdt.progress import progress_bar
 from gcdt.provenance import package_versions, utc_now
 
 Method = Literal["dt", "bc"]
@@ -42,6 +41,9 @@ CHECKPOINT_VERSION = 1
 CHECKPOINT_NAME = "checkpoint.pt"
 LOG_NAME = "train_log.csv"
 PAPER_EPOCHS = 120
+#: TrainConfig fields that only decide when checkpoints are written, not what is learnt:
+#: a run may be resumed with other values.
+SCHEDULING_FIELDS = ("checkpoint_every", "checkpoint_seconds")
 
 
 @dataclass(frozen=True)
@@ -69,7 +71,8 @@ class TrainConfig:
     device: str = "auto"  # "auto" = CUDA when present, else CPU
     bf16: bool = False  # bfloat16 autocast for the forward pass
     log_every: int = 50
-    checkpoint_every: int = 1000
+    checkpoint_every: int = 1000  # a checkpoint every this many steps,
+    checkpoint_seconds: float = 30.0  # and whenever this many seconds passed since the last
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -83,6 +86,8 @@ class TrainConfig:
                 raise GcdtError(f"{name} must be a positive integer, got {value!r}")
         if not self.lr > 0:
             raise GcdtError(f"lr must be > 0, got {self.lr!r}")
+        if isinstance(self.checkpoint_seconds, bool) or not self.checkpoint_seconds > 0:
+            raise GcdtError(f"checkpoint_seconds must be > 0, got {self.checkpoint_seconds!r}")
 
     def total_steps(self, n_episodes: int) -> int:
         if self.steps is not None:
@@ -277,7 +282,9 @@ def train(
     window_loss, window_steps = 0.0, 0  # losses since the last log row
     if resume:
         ckpt = load_checkpoint(ckpt_path)
-        if ckpt["train_config"] != asdict(cfg) or ckpt["task"] != dataset.task:
+        if _learning_config(ckpt["train_config"]) != _learning_config(asdict(cfg)) or (
+            ckpt["task"] != dataset.task
+        ):
             raise GcdtError(f"{ckpt_path} was trained with another config or task: cannot resume")
         model.load_state_dict(ckpt["model"])
         optimizer.load_state_dict(ckpt["optimizer"])
@@ -297,6 +304,9 @@ def train(
     sampler = WindowSampler(dataset, cfg, mean, std, device)
 
     def save(complete: bool) -> None:
+        nonlocal last_save
+        # The log first: wherever a checkpoint exists, a log at least as recent does too.
+        _write_log(log_path, history)
         save_checkpoint(ckpt_path, {
             "format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION,
             "method": cfg.method, "task": dataset.task, "train_config": asdict(cfg),
@@ -309,13 +319,14 @@ def train(
             "log_window": [window_loss, window_steps],
             "dataset": dataset.summary(), "created": utc_now(), "versions": package_versions(),
         })  # fmt: skip
+        last_save = time.perf_counter()
 
     end = total if stop_after is None else min(total, step + stop_after)
     board = _tensorboard(out_dir)
-    bar = tqdm(total=total, initial=step, desc=f"train {cfg.method} on {dataset.task}",
-               disable=not progress, leave=False)  # fmt: skip
+    bar = progress_bar(total=total, initial=step, desc=f"train {cfg.method} on {dataset.task}",
+                       progress=progress, leave=False)  # fmt: skip
     model.train()
-    started = time.perf_counter()
+    started = last_save = time.perf_counter()
     try:
         while step < end:
             loss = train_step(model, optimizer, sampler.sample(rng), cfg, device)
@@ -340,14 +351,17 @@ def train(
                     board.add_scalar("train/loss", history[-1]["loss"], step)
                     board.add_scalar("train/lr", history[-1]["lr"], step)
                 window_loss, window_steps = 0.0, 0
-            if step % cfg.checkpoint_every == 0 and step < end:
+            # By steps and by the clock: a killed run loses at most checkpoint_seconds of work.
+            if step < end and (
+                step % cfg.checkpoint_every == 0
+                or time.perf_counter() - last_save >= cfg.checkpoint_seconds
+            ):
                 save(complete=False)
     finally:
         bar.close()
         if board is not None:
             board.close()
     save(complete=step >= total)
-    _write_log(log_path, history)
     return TrainResult(ckpt_path, log_path, step, time.perf_counter() - started,
                        history[-1]["loss"] if history else float("nan"), history)  # fmt: skip
 
@@ -361,31 +375,23 @@ def _tensorboard(out_dir: Path):
     return SummaryWriter(str(out_dir / "tensorboard"))
 
 
+def _learning_config(train_config: dict[str, Any]) -> dict[str, Any]:
+    """A config as `asdict` gives it, less the checkpoint schedule: what resuming compares."""
+    return {k: v for k, v in train_config.items() if k not in SCHEDULING_FIELDS}
+
+
 def _write_log(path: Path, history: list[dict[str, float]]) -> None:
     """The CSV training log (step, loss, lr, seconds), written atomically."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=["step", "loss", "lr", "seconds"])
-            writer.writeheader()
-            writer.writerows(history)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    with atomic_write(path) as f:
+        writer = csv.DictWriter(f, fieldnames=["step", "loss", "lr", "seconds"])
+        writer.writeheader()
+        writer.writerows(history)
 
 
 def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
     """`torch.save` through a temp file and a rename: never half a checkpoint."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(payload, f)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    with atomic_write(path, binary=True) as f:
+        torch.save(payload, f)
 
 
 def load_checkpoint(path: str | Path) -> dict[str, Any]:

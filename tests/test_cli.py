@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from gcdt.cli import main
@@ -222,3 +224,128 @@ def test_bad_dataset_input_exit_2_nothing_written(
     before = sorted(p.name for p in data_files.iterdir())
     assert_usage_error([a.format(d=data_files) for a in argv], message)
     assert sorted(p.name for p in data_files.iterdir() if p.name != "minari") == before
+
+
+# --- outputs that cannot be written, files that are not datasets ---------------------------
+
+UNWRITABLE = [
+    ["collect", "--policy", "scripted", "--task", "reach", "--transitions", "100000",
+     "--out", "{out}.npz"],
+    ["dataset", "mix", "--expert", "{d}/x.npz", "--random", "{d}/x.npz", "--ratio", "0.5",
+     "--size", "10", "--out", "{out}.npz"],
+    ["dataset", "subset", "{d}/x.npz", "--size", "10", "--out", "{out}.npz"],
+    ["dataset", "import-minari", "tests/x-v0", "--out", "{out}.npz"],
+    ["dataset", "import-authors", "{d}/x.pkl", "--out", "{out}.npz"],
+    ["evaluate", *RANDOM_REACH, "--episodes", "1", "--out", "{out}.json"],
+    ["train", "--dataset", "{d}/x.npz", "--out", "{out}"],
+    ["tqc", "train", "--task", "reach", "--reward", "sparse", "--out", "{out}"],
+]  # fmt: skip
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Every command's work (policies, data, training) fails the test if it starts."""
+    import gcdt.baselines.tqc_her as tqc
+    import gcdt.data
+    import gcdt.policies
+    import gcdt.training
+
+    def started(*args, **kwargs):
+        pytest.fail("work started before the output location was checked")
+
+    for module, names in [
+        (gcdt.data, ["collect", "load_dataset", "import_minari", "import_authors"]),
+        (gcdt.policies, ["make_policy"]),
+        (gcdt.training, ["train"]),
+        (tqc, ["load_tqc_config", "train_tqc"]),
+    ]:
+        for name in names:
+            monkeypatch.setattr(module, name, started)
+
+
+def _tree(root):
+    return sorted((str(p.relative_to(root)), p.is_dir()) for p in root.rglob("*"))
+
+
+@pytest.mark.parametrize(
+    "argv", UNWRITABLE, ids=lambda a: "-".join(w for w in a[:2] if w[0] != "-")
+)
+def test_unwritable_out_fails_before_any_work(assert_usage_error, no_work, tmp_path, argv):
+    """--out below a regular file (unwritable even for root): exit 2 at once, nothing made."""
+    import time
+
+    (tmp_path / "file.txt").write_text("x")
+    before = _tree(tmp_path)
+    out = tmp_path / "file.txt" / "deeper" / "out"
+    started = time.perf_counter()
+    assert_usage_error(
+        [a.format(d=tmp_path, out=out) for a in argv],
+        f"cannot write {out}",
+    )
+    assert time.perf_counter() - started < 5
+    assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (UNWRITABLE[0], "it is a folder, not a file; choose another --out"),
+        (UNWRITABLE[6], "it is a file, not a folder; choose another --out"),
+    ],
+    ids=["collect-into-folder", "train-into-file"],
+)
+def test_out_of_the_wrong_kind_fails_before_any_work(
+    assert_usage_error, no_work, tmp_path, argv, message
+):
+    (tmp_path / "taken.npz").mkdir()  # a folder where collect writes a file
+    (tmp_path / "taken").write_text("x")  # a file where train writes a folder
+    before = _tree(tmp_path)
+    assert_usage_error([a.format(d=tmp_path, out=tmp_path / "taken") for a in argv], message)
+    assert _tree(tmp_path) == before
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0,
+                    reason="root bypasses file permissions")  # fmt: skip
+def test_collect_into_read_only_folder_fails_before_any_work(assert_usage_error, no_work, tmp_path):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        assert_usage_error(
+            [a.format(out=locked / "sub" / "out") for a in UNWRITABLE[0]],
+            f"cannot write {locked}/sub/out.npz: {locked} is not writable (permission denied",
+        )
+        assert list(locked.iterdir()) == []
+    finally:
+        locked.chmod(0o755)
+
+
+def _object_array_npz(path):
+    np.savez(path, __metadata__=np.array([{"format": "gcdt.dataset"}], dtype=object))
+
+
+@pytest.mark.parametrize(
+    ("make", "reason"),
+    [
+        (lambda p: p.write_bytes(np.random.default_rng(0).bytes(4096)), "not a zip archive"),
+        (lambda p: p.write_bytes(b""), "the file is empty"),
+        (lambda p: p.write_bytes(p.with_name("good.npz").read_bytes()[:3000]), "truncated"),
+        (lambda p: np.save(p.with_suffix(".npy"), np.zeros(3)) or p.with_suffix(".npy").rename(p),
+         "not a zip archive"),
+        (_object_array_npz, "an entry holds Python objects"),
+    ],
+    ids=["random-bytes", "empty", "truncated", "npy", "object-array"],
+)  # fmt: skip
+def test_dataset_info_on_a_non_dataset_never_suggests_unpickling(
+    make_dataset, tmp_path, capsys, make, reason
+):
+    make_dataset("reach", lengths=(30, 30)).save(tmp_path / "good.npz")
+    path = tmp_path / "bad.npz"
+    make(path)
+    capsys.readouterr()
+    assert main(["dataset", "info", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    expected = f"gcdt: error: {path} is not a gcdt dataset (.npz archive written by gcdt collect): "
+    assert err[0].startswith(expected), err[0]
+    assert reason in err[0] and "pickle" not in err[0].lower(), err[0]

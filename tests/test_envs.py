@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import multiprocessing as mp
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -191,3 +193,34 @@ def test_seeded_resets_make_seedless_resets_reproducible():
             env.close()
     np.testing.assert_array_equal(goals[0], goals[1])
     assert not np.array_equal(goals[0][0], goals[0][1])  # a new goal each episode
+
+
+QUIET_ENVS = """
+import os, sys
+# Like a Jupyter kernel: sys.stdout's fileno() is a copy of fd 1, not fd 1 where C prints.
+sys.stdout = open(os.dup(1), "w")
+from gcdt.envs import make_env, make_vec_env
+print("before", flush=True)
+env = make_env("push", "sparse")
+env.reset(seed=0)
+env.step(env.action_space.sample())
+env.render()
+env.close()
+envs = make_vec_env("reach", "sparse", 2)  # sub-envs built in spawned workers
+envs.reset(seed=[0, 1])
+envs.close()
+print("after", flush=True)
+"""
+
+
+def test_env_creation_prints_no_pybullet_banner():
+    """pybullet's build-time banner and `argv[0]=` dump never reach the process's output,
+    in this process or in vector-env workers, while Python's own output still does."""
+    run = subprocess.run(
+        [sys.executable, "-c", QUIET_ENVS], capture_output=True, text=True, timeout=300
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout == "before\nafter\n"
+    for stream in (run.stdout, run.stderr):
+        assert "pybullet build time" not in stream
+        assert "argv[0]" not in stream

@@ -118,8 +118,7 @@ def test_directions_set_each_claim_of_the_paper_beside_ours(runs):
 
 
 def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
-    monkeypatch.setattr("gcdt.experiments.store.REPO_ROOT", tmp_path)
-    monkeypatch.setattr("gcdt.report.figures.REPO_ROOT", tmp_path)
+    monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path))
     _write_runs(tmp_path / "results" / PROFILE.name / "runs")
     monkeypatch.setitem(report.PROFILES, PROFILE.name, PROFILE)
     assert "No wall time recorded" in report.readme_block(PROFILE)

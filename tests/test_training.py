@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import time
+
 import numpy as np
 import pytest
 import torch
@@ -61,6 +66,65 @@ def test_resumed_run_equals_uninterrupted(make_dataset, tmp_path):
         train(ds, cfg, tmp_path / "full", progress=False)
     with pytest.raises(GcdtError, match="another config or task: cannot resume"):
         train(ds, TrainConfig(steps=31, context=5, **FAST), tmp_path / "full", resume=True)
+
+
+def test_killed_cli_run_resumes_to_the_uninterrupted_weights(make_dataset, tmp_path):
+    """`gcdt train` checkpoints by the clock too, with its log; SIGKILLed, it resumes to the
+    very weights of a run that was never interrupted."""
+    data = make_dataset("reach", lengths=(12, 9, 12)).save(tmp_path / "d.npz")
+    steps = 400  # about 3 s of training; a checkpoint every 0.2 s
+    # One thread each: two runs side by side on a small machine, same arithmetic in both.
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    procs = []
+
+    def gcdt_train(out, *extra):
+        argv = ["train", "--dataset", str(data), "--out", str(tmp_path / out), "--steps",
+                str(steps), "--context", "2", "--batch-size", "4", "--device", "cpu",
+                "--checkpoint-seconds", "0.2", "--no-progress", *extra]  # fmt: skip
+        procs.append(subprocess.Popen([sys.executable, "-m", "gcdt", *argv], env=env,
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                      text=True))  # fmt: skip
+        return procs[-1]
+
+    full, killed = gcdt_train("full"), gcdt_train("split")
+    try:
+        ckpt_path = tmp_path / "split" / "checkpoint.pt"
+        deadline = time.monotonic() + 60
+        while not ckpt_path.exists() and killed.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        killed.kill()  # SIGKILL: no handler, no final save
+        killed.wait()
+        assert ckpt_path.exists(), killed.stderr.read()
+        ckpt = load_checkpoint(ckpt_path)
+        assert 0 < ckpt["step"] < steps and not ckpt["complete"]
+        assert (tmp_path / "split" / "train_log.csv").is_file()
+        resumed = gcdt_train("split", "--resume")
+        assert resumed.wait(timeout=120) == 0, resumed.stderr.read()
+        assert full.wait(timeout=120) == 0, full.stderr.read()
+    finally:
+        for proc in procs:
+            proc.kill()
+            proc.wait()
+    a = load_checkpoint(tmp_path / "full" / "checkpoint.pt")
+    b = load_checkpoint(tmp_path / "split" / "checkpoint.pt")
+    assert a["complete"] and b["complete"] and a["step"] == b["step"] == steps
+    assert a["model"].keys() == b["model"].keys()
+    for key, tensor in a["model"].items():
+        assert torch.equal(tensor, b["model"][key]), key
+    log = (tmp_path / "split" / "train_log.csv").read_text().splitlines()
+    assert len(log) == 1 + steps // 50 and log[-1].startswith(f"{steps},")
+
+
+def test_resume_ignores_the_checkpoint_schedule(make_dataset, tmp_path):
+    ds = make_dataset("reach", lengths=(10, 10))
+    train(ds, TrainConfig(method="bc", steps=20, **FAST), tmp_path, stop_after=5, progress=False)
+    other = TrainConfig(method="bc", steps=20, log_every=10, checkpoint_every=7,
+                        checkpoint_seconds=0.5)  # fmt: skip
+    assert train(ds, other, tmp_path, resume=True, progress=False).steps == 20
+    with pytest.raises(GcdtError, match="checkpoint_seconds must be > 0, got 0"):
+        TrainConfig(checkpoint_seconds=0)
+    with pytest.raises(GcdtError, match="checkpoint_seconds must be > 0, got nan"):
+        TrainConfig(checkpoint_seconds=float("nan"))
 
 
 def test_nan_loss_stops_and_keeps_last_good_checkpoint(make_dataset, tmp_path, monkeypatch):

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,7 +25,7 @@ import yaml
 
 from gcdt.envs import check_reward, get_task
 from gcdt.errors import GcdtError
-from gcdt.paths import write_json_atomic
+from gcdt.paths import atomic_write, write_json_atomic
 from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_now
 
 CONFIG_FILE = Path(__file__).with_name("tqc_her.yaml")
@@ -281,13 +280,8 @@ def train_tqc(
 
 def _save_zip(model: Any, path: Path) -> None:
     """`model.save` through a temp file and a rename: a reader never sees half a zip."""
-    tmp = path.with_name(f".{path.stem}.partial.zip")
-    try:
-        model.save(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_write(path, binary=True) as f:
+        model.save(f)
 
 
 class _PeriodicEvaluation:
@@ -356,13 +350,14 @@ class _PeriodicEvaluation:
 
     def callback(self, total: int, learning_starts: int, progress: bool) -> Any:
         from stable_baselines3.common.callbacks import BaseCallback
-        from tqdm.auto import tqdm
+
+        from gcdt.progress import progress_bar
 
         evaluation = self
 
         class _Callback(BaseCallback):
             def _on_training_start(self) -> None:
-                self.bar = tqdm(total=total, desc="TQC+HER", unit="step", disable=not progress)
+                self.bar = progress_bar(total=total, desc="TQC+HER", unit="step", progress=progress)
 
             def _on_step(self) -> bool:
                 self.bar.update(self.training_env.num_envs)

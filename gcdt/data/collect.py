@@ -6,12 +6,12 @@ import time
 from typing import Any
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from gcdt.data.dataset import EPISODE_ARRAYS, TRANSITION_ARRAYS, Dataset, offsets_from_lengths
 from gcdt.envs import OBS_KEYS, compute_rewards, env_id, get_task
 from gcdt.errors import GcdtError
 from gcdt.policies.base import Policy
+from gcdt.progress import progress_bar
 from gcdt.provenance import package_versions, utc_now
 from gcdt.rollout import VectorRollout
 
@@ -45,11 +45,11 @@ def collect(
     finished: dict[int, dict[str, np.ndarray]] = {}
     kept, kept_steps = 0, 0  # the complete prefix of episodes 0..kept-1 and its length
     started = time.perf_counter()
-    bar = tqdm(
+    bar = progress_bar(
         total=transitions,
         unit="step",
         desc=f"collect {policy.name} on {task}",
-        disable=not progress,
+        progress=progress,
         leave=False,
     )
     with rollout:

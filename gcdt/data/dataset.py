@@ -23,8 +23,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
-import os
-import tempfile
 import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -35,11 +33,13 @@ import numpy as np
 
 from gcdt.envs import OBS_KEYS, REWARDS, TASKS, TaskSpec, check_reward, get_task, goal_state
 from gcdt.errors import GcdtError
+from gcdt.paths import atomic_write
 
 #: Bumped whenever the arrays or their meaning change; files of another version are refused.
 SCHEMA_VERSION = 1
 FORMAT = "gcdt.dataset"
 _META_KEY = "__metadata__"
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip's first entry, or an empty zip
 
 
 def _width(name: str, spec: TaskSpec) -> int | None:
@@ -210,17 +210,10 @@ class Dataset:
         path = Path(path)
         if path.suffix != ".npz":
             raise GcdtError(f"dataset path {str(path)!r} must end in .npz")
-        path.parent.mkdir(parents=True, exist_ok=True)
         header = {"format": FORMAT, "schema_version": SCHEMA_VERSION, "task": self.task}
         meta = np.array(json.dumps({**header, "metadata": self.metadata}))
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.savez(f, **self.arrays, **{_META_KEY: meta})
-            os.replace(tmp, path)
-        except BaseException:
-            os.unlink(tmp)
-            raise
+        with atomic_write(path, binary=True) as f:
+            np.savez(f, **self.arrays, **{_META_KEY: meta})
         return path
 
     @classmethod
@@ -229,6 +222,18 @@ class Dataset:
         path = Path(path)
         if not path.is_file():
             raise GcdtError(f"dataset file {str(path)!r} does not exist")
+        not_ours = f"{path} is not a gcdt dataset (.npz archive written by gcdt collect)"
+        try:
+            with open(path, "rb") as f:
+                magic = f.read(4)
+        except OSError as err:
+            raise GcdtError(f"{not_ours}: cannot read it ({err.strerror})") from None
+        # Anything but a zip would reach numpy's .npy and pickle readers, whose refusal
+        # advises unpickling the file.
+        if not magic:
+            raise GcdtError(f"{not_ours}: the file is empty")
+        if magic not in _ZIP_MAGIC:
+            raise GcdtError(f"{not_ours}: truncated or corrupt file (not a zip archive)")
         try:
             with np.load(path, allow_pickle=False) as npz:
                 if _META_KEY not in npz.files:
@@ -254,13 +259,19 @@ class Dataset:
         except GcdtError:
             raise
         except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as err:
-            raise GcdtError(
-                f"{path} is not a readable gcdt dataset (truncated or corrupt file: {err})"
-            ) from None
+            raise GcdtError(f"{not_ours}: {_load_failure(err)}") from None
         try:
             return cls(header.get("task"), arrays, header.get("metadata") or {})
         except GcdtError as err:
             raise GcdtError(f"{path}: {err}") from None
+
+
+def _load_failure(err: Exception) -> str:
+    """A short reason for a failed read; never numpy's advice to load pickled data."""
+    text = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+    if "pickle" in text.lower():  # an object array inside the archive
+        return "an entry holds Python objects, which gcdt datasets never contain"
+    return f"truncated or corrupt file ({text[:160]})"
 
 
 def offsets_from_lengths(lengths: Sequence[int] | np.ndarray) -> np.ndarray:

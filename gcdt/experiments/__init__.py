@@ -7,8 +7,9 @@ sweep(profile, backend="local"|"ray")     # run what is not done yet (gcdt.exper
 
 from gcdt.experiments.grid import SECTIONS, GridEntry, RunSpec, build_grid
 from gcdt.experiments.profiles import PROFILES, Profile, deviations, deviations_text, get_profile
-from gcdt.experiments.store import RunStore, results_dir
+from gcdt.experiments.store import RunStore
 from gcdt.experiments.sweep import BACKENDS, SweepSummary, plan, sweep
+from gcdt.paths import results_dir
 
 __all__ = [
     "BACKENDS",

@@ -1,5 +1,8 @@
 """Content-keyed artifacts shared by the runs of a sweep: datasets, TQC agents, checkpoints.
 
+`dataset(spec)`, `tqc_agent(spec)` and `checkpoint(spec)` return the artifact, made first
+when it does not exist yet (the explorer notebook gets its checkpoint this way too).
+
 Each artifact lives under `<artifacts>/grid/` at a path named by the hash of the spec that
 makes it, so every run that needs the same dataset (or agent) uses one copy, made once. An
 exclusive file lock per artifact stops two workers (processes or Ray tasks on one machine, or
@@ -11,13 +14,14 @@ collection (both rewards are stored).
 from __future__ import annotations
 
 import contextlib
+import csv
 import fcntl
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gcdt.data import Dataset, collect, load_dataset, mix, subset
-from gcdt.experiments.grid import DataSpec, RunSpec, TQCSpec
+from gcdt.experiments.grid import OFFLINE_METHODS, DataSpec, RunSpec, TQCSpec
 from gcdt.paths import artifacts_dir
 
 if TYPE_CHECKING:
@@ -97,6 +101,35 @@ def _collect(spec: DataSpec) -> Dataset:
                    reward=reward, progress=False)  # fmt: skip
 
 
+def tqc_curve(run_dir: Path, fields: tuple[str, ...]) -> list[dict[str, float]]:
+    """The learning curve (`eval.csv`) of a finished TQC+HER run, `fields` of each point."""
+    with open(run_dir / "eval.csv", newline="") as f:
+        return [{k: float(row[k]) for k in fields} for row in csv.DictReader(f)]
+
+
 def checkpoint_dir(spec: RunSpec) -> Path:
     """Where an offline run keeps its training checkpoint (resumed after an interruption)."""
     return grid_dir() / "checkpoints" / spec.key()
+
+
+def checkpoint(spec: RunSpec) -> Path:
+    """The finished training checkpoint of offline run `spec`: trained first if it does not
+    exist yet, resumed if an earlier training was interrupted."""
+    from gcdt.training import CHECKPOINT_NAME, TrainConfig, load_checkpoint, train
+
+    out = checkpoint_dir(spec)
+    path = out / CHECKPOINT_NAME
+    with _locked(spec.key()):
+        ckpt = load_checkpoint(path) if path.exists() else None
+        if ckpt is None or not ckpt["complete"]:
+            method, conditioning = OFFLINE_METHODS[spec.method]
+            cfg = TrainConfig(
+                method=method,
+                goal_conditioning=conditioning,
+                reward=spec.reward,
+                steps=spec.train_steps,
+                lr=spec.learning_rate,
+                seed=spec.seed,
+            )
+            train(dataset(spec.data), cfg, out, resume=ckpt is not None, progress=False)
+    return path

@@ -19,10 +19,13 @@ from typing import Any
 import numpy as np
 
 from gcdt.experiments import artifacts
-from gcdt.experiments.grid import OFFLINE_METHODS, RUN_SCHEMA, RunSpec
+from gcdt.experiments.grid import RUN_SCHEMA, RunSpec
 from gcdt.experiments.store import RunStore
 from gcdt.paths import ARTIFACTS_ENV
 from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_now
+
+#: What a TQC+HER learning-curve point keeps (its timings depend on the machine, not the run).
+TQC_CURVE_FIELDS = ("env_steps", "success_rate", "mean_return", "episodes")
 
 
 def execute_run(spec_dict: dict[str, Any], store_root: str, artifacts_root: str,
@@ -69,7 +72,9 @@ def execute_run(spec_dict: dict[str, Any], store_root: str, artifacts_root: str,
 
 
 def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict[str, Any]]:
-    """The run's agent as a policy (made if needed), and what its training recorded."""
+    """The run's agent as a policy (made if needed), and what its training recorded: the
+    result keeps the learning curve (TQC+HER) or the loss curve and model config (offline),
+    so that every figure can be drawn from results alone, without the artifacts."""
     began = time.perf_counter()
     if spec.method == "tqc":
         from gcdt.policies.tqc import TQCPolicy
@@ -77,35 +82,29 @@ def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict
         model = artifacts.tqc_agent(spec.tqc)
         timings["train_seconds"] = round(time.perf_counter() - began, 3)
         run = json.loads((model.parent / "run.json").read_text())
-        curve_point = ("env_steps", "success_rate", "mean_return", "episodes")  # no timings
         trained = {
             "env_steps": run["env_steps"],
             "overrides": run["overrides"],
-            **{k: {f: run[k][f] for f in curve_point} for k in ("best", "final")},
+            **{k: {f: run[k][f] for f in TQC_CURVE_FIELDS} for k in ("best", "final")},
+            "curve": artifacts.tqc_curve(model.parent, TQC_CURVE_FIELDS),
         }
         return TQCPolicy(model, spec.task), trained
 
     from gcdt.policies.trained import TrainedPolicy
-    from gcdt.training import TrainConfig, load_checkpoint, train
+    from gcdt.training import load_checkpoint
 
     data = artifacts.dataset(spec.data)
     timings["data_seconds"] = round(time.perf_counter() - began, 3)
-    method, conditioning = OFFLINE_METHODS[spec.method]
-    cfg = TrainConfig(method=method, goal_conditioning=conditioning, reward=spec.reward,
-                      steps=spec.train_steps, lr=spec.learning_rate, seed=spec.seed)  # fmt: skip
-    out = artifacts.checkpoint_dir(spec)
-    ckpt_path = out / "checkpoint.pt"
     began = time.perf_counter()
-    ckpt = load_checkpoint(ckpt_path) if ckpt_path.exists() else None
-    if ckpt is None or not ckpt["complete"]:  # fresh, or resumed after an interruption
-        train(data, cfg, out, resume=ckpt is not None, progress=False)
-        ckpt = load_checkpoint(ckpt_path)
+    ckpt = load_checkpoint(artifacts.checkpoint(spec))
     timings["train_seconds"] = round(time.perf_counter() - began, 3)
     history = ckpt["history"]
     trained = {
         "steps": ckpt["step"],
         "final_loss": history[-1]["loss"] if history else None,
-        "dataset": {k: data.summary()[k] for k in ("transitions", "episodes", "success_rate")},
+        "dataset": {k: v for k, v in data.summary().items() if k != "task"},
+        "model_config": ckpt["model_config"],
+        "loss_curve": [{k: row[k] for k in ("step", "loss", "lr")} for row in history],
     }
     return TrainedPolicy(ckpt, spec.task), trained
 

@@ -13,15 +13,10 @@ from pathlib import Path
 from typing import Any
 
 from gcdt.experiments.grid import RUN_SCHEMA
-from gcdt.paths import REPO_ROOT, write_json_atomic
+from gcdt.paths import write_json_atomic
 
 #: What a result file says about its run.
 STATES = ("done", "failed", "missing", "corrupt")
-
-
-def results_dir(profile: str) -> Path:
-    """Where a profile's results live in the repository."""
-    return REPO_ROOT / "results" / profile
 
 
 @dataclass(frozen=True)

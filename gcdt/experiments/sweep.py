@@ -26,15 +26,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tqdm.auto import tqdm
-
 from gcdt.errors import GcdtError
 from gcdt.experiments.costs import CostModel
 from gcdt.experiments.grid import GridEntry, build_grid
 from gcdt.experiments.profiles import Profile
 from gcdt.experiments.runner import execute_run
-from gcdt.experiments.store import RunStore, results_dir
-from gcdt.paths import artifacts_dir
+from gcdt.experiments.store import RunStore
+from gcdt.paths import artifacts_dir, results_dir
+from gcdt.progress import progress_bar
 
 BACKENDS = ("local", "ray")
 RAY_CONNECT_TIMEOUT = 5.0  # seconds to reach a cluster's address before giving up
@@ -153,8 +152,8 @@ def sweep(
     started = time.perf_counter()
     if todo:
         run = _run_ray if backend == "ray" else _run_local
-        bar = tqdm(total=len(todo), desc=f"sweep {profile.name}", unit="run",
-                   disable=not progress)  # fmt: skip
+        bar = progress_bar(total=len(todo), desc=f"sweep {profile.name}", unit="run",
+                           progress=progress)  # fmt: skip
         try:
             for key, status in run(todo, str(store.root), workers, address, profile):
                 (summary.done if status == "done" else summary.failed).append(key)

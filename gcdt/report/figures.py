@@ -11,36 +11,46 @@ reward, the mean over seeds with its standard deviation as error bars.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from gcdt.paths import REPO_ROOT
+from gcdt.paths import figures_dir, write_if_changed
 from gcdt.report.tables import TASK_NAMES
 
 FORMATS = ("png", "pdf")
 
 
-def figures_dir(profile: str) -> Path:
-    return REPO_ROOT / "figures" / profile
+#: No creation dates or tool versions in the files: the same figure gives the same bytes, so
+#: re-rendering unchanged results leaves the published figures (and git) untouched.
+METADATA = {
+    "png": {"Software": None},
+    "pdf": {"Creator": None, "Producer": None, "CreationDate": None},
+}
 
 
 def save(fig: plt.Figure, out_dir: str | Path, name: str) -> list[Path]:
-    """Write `fig` as `name`.png and `name`.pdf into `out_dir`; return the paths."""
+    """Write `fig` as `name`.png and `name`.pdf into `out_dir` (only files whose bytes
+    change are rewritten); return the paths."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{name}.{ext}" for ext in FORMATS]
-    for path in paths:
-        fig.savefig(path, dpi=150, bbox_inches="tight")
+    for path, ext in zip(paths, FORMATS, strict=True):
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format=ext, dpi=150, bbox_inches="tight", metadata=METADATA[ext])
+        write_if_changed(path, buffer.getvalue())
     plt.close(fig)
     return paths
 
 
 def _success_panels(runs: pd.DataFrame, section: str, x: str, xlabel: str,
-                    scale: float = 1.0) -> plt.Figure:  # fmt: skip
-    """Success rate (%) against `x`: one panel per reward, one line per task, std over seeds."""
+                    scale: float = 1.0) -> plt.Figure | None:  # fmt: skip
+    """Success rate (%) against `x`: one panel per reward, one line per task, std over seeds
+    (None when no run belongs to `section`)."""
     sel = runs[runs["sections"].apply(lambda s: section in s) & (runs["method"] == "gcdt")]
+    if sel.empty:
+        return None
     rewards = [r for r in ("dense", "sparse") if r in set(sel["reward"])]
     fig, axes = plt.subplots(1, len(rewards), figsize=(5 * len(rewards), 3.6), squeeze=False,
                              sharey=True)  # fmt: skip
@@ -63,17 +73,19 @@ def _success_panels(runs: pd.DataFrame, section: str, x: str, xlabel: str,
     return fig
 
 
-def dataset_size_figure(runs: pd.DataFrame) -> plt.Figure:
+def dataset_size_figure(runs: pd.DataFrame) -> plt.Figure | None:
     """Fig. 3 (RQ4): 'Impact of dataset size on success rate'."""
     fig = _success_panels(runs, "rq4", "size", "Dataset size (transitions)")
-    fig.suptitle("Impact of dataset size on success rate", y=1.03)
+    if fig is not None:
+        fig.suptitle("Impact of dataset size on success rate", y=1.03)
     return fig
 
 
-def expert_ratio_figure(runs: pd.DataFrame) -> plt.Figure:
+def expert_ratio_figure(runs: pd.DataFrame) -> plt.Figure | None:
     """Fig. 4 (RQ5): 'Impact of expert data percentage'."""
     fig = _success_panels(runs, "rq5", "expert_ratio", "Expert data (%)", scale=100.0)
-    fig.suptitle("Impact of expert data percentage", y=1.03)
+    if fig is not None:
+        fig.suptitle("Impact of expert data percentage", y=1.03)
     return fig
 
 
@@ -136,18 +148,61 @@ def architecture_figure(model_config: dict, task: str) -> plt.Figure:
 
 def learning_curves_figure(curves: dict[str, pd.DataFrame], x: str, y: str, xlabel: str,
                            ylabel: str, title: str) -> plt.Figure:  # fmt: skip
-    """One line per labelled curve (TQC+HER success against env steps, DT loss, ...)."""
-    fig, ax = plt.subplots(figsize=(6, 3.6))
-    for label, frame in curves.items():
-        ax.plot(frame[x], frame[y] * (100 if y == "success_rate" else 1), label=label)
+    """One line per labelled curve (TQC+HER success against env steps, DT loss, ...).
+
+    Points are marked when a curve has few of them (a one-point curve is otherwise
+    invisible), and colours come from a 20-colour cycle so that a dozen curves stay apart.
+    """
+    fig, ax = plt.subplots(figsize=(7, 4))
+    colours = plt.get_cmap("tab20").colors
+    for i, (label, frame) in enumerate(curves.items()):
+        ax.plot(frame[x], frame[y] * (100 if y == "success_rate" else 1), label=label,
+                color=colours[i % len(colours)], marker="o" if len(frame) <= 30 else None,
+                markersize=4)  # fmt: skip
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(alpha=0.3)
     if len(curves) > 1:
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
     return fig
+
+
+def tqc_learning_curves_figure(runs: pd.DataFrame) -> plt.Figure | None:
+    """TQC+HER's success rate against online env steps, from the runs' stored curves."""
+    curves = {
+        f"{r.task}/{r.reward} seed {r.seed}": pd.DataFrame(r.training["curve"])
+        for r in runs[runs["method"] == "tqc"].itertuples()
+        if r.training.get("curve")
+    }
+    if not curves:
+        return None
+    return learning_curves_figure(curves, "env_steps", "success_rate", "online env steps",
+                                  "success rate (%)", "TQC+HER learning curves")  # fmt: skip
+
+
+def training_loss_figure(runs: pd.DataFrame) -> plt.Figure | None:
+    """The offline training loss of Table 1's GC-DT and BC runs, from the stored curves."""
+    table1 = runs[runs["sections"].apply(lambda s: "table1" in s)]
+    curves = {
+        f"{r.method} {r.task}/{r.reward} seed {r.seed}": pd.DataFrame(r.training["loss_curve"])
+        for r in table1[table1["method"].isin(["gcdt", "bc"])].itertuples()
+        if r.training.get("loss_curve")
+    }
+    if not curves:
+        return None
+    return learning_curves_figure(curves, "step", "loss", "gradient step", "action MSE",
+                                  "Offline training loss")  # fmt: skip
+
+
+def table1_architecture_figure(runs: pd.DataFrame) -> plt.Figure | None:
+    """Fig. 2 drawn from the model config stored with a Table 1 GC-DT run."""
+    gcdt = runs[(runs["method"] == "gcdt") & runs["sections"].apply(lambda s: "table1" in s)]
+    for r in gcdt.itertuples():
+        if r.training.get("model_config"):
+            return architecture_figure(r.training["model_config"], r.task)
+    return None
 
 
 def attention_figure(weights, layer: int = -1) -> plt.Figure:
@@ -174,4 +229,7 @@ __all__ = [
     "figures_dir",
     "learning_curves_figure",
     "save",
+    "table1_architecture_figure",
+    "tqc_learning_curves_figure",
+    "training_loss_figure",
 ]

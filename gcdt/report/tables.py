@@ -1,7 +1,7 @@
 """Tables from `results/<profile>/runs/` alone: Table 1 (RQ1-RQ3) and the DT ablation.
 
-Each cell is the mean over seeds with its standard deviation and a bootstrap 95 % confidence
-interval of that mean (a single seed has no spread: its interval is the value itself), and
+Each cell is the mean over seeds with its standard deviation and a 95 % confidence interval
+of that mean (bootstrap over seeds; with one seed, over its evaluation episodes), and
 Table 1 puts the paper's values beside ours. Written as CSV, Markdown and LaTeX (booktabs,
 laid out like the paper's table: rewards as blocks, methods as rows, tasks as columns).
 """
@@ -16,7 +16,8 @@ import pandas as pd
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
 from gcdt.experiments.profiles import Profile
-from gcdt.experiments.store import RunStore, results_dir
+from gcdt.experiments.store import RunStore
+from gcdt.paths import results_dir
 
 TASK_NAMES = {"reach": "Reach", "push": "Push", "pick_and_place": "PickAndPlace"}
 METHOD_NAMES = {"gcdt": "GC-DT", "bc": "BC", "tqc": "TQC+HER", "dt": "DT (no goal)",
@@ -36,15 +37,18 @@ PAPER_TABLE1 = {
 BOOTSTRAP_SAMPLES = 10_000
 
 
-def load_runs(profile: Profile, root: str | Path | None = None) -> pd.DataFrame:
-    """One row per finished run of `profile`'s grid: its spec, sections and metrics."""
-    store = RunStore(Path(root) if root else results_dir(profile.name) / "runs")
+def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFrame:
+    """One row per finished run of `profile`'s grid: its spec, sections, metrics, and what its
+    training recorded (`training`: curves, dataset summary, model config). `runs_dir` defaults
+    to `results/<profile>/runs/` under `gcdt.paths.outputs_root()`."""
+    store = RunStore(Path(runs_dir) if runs_dir else results_dir(profile.name) / "runs")
     rows = []
     for entry in build_grid(profile):
         stored = store.read(entry.spec.key())
         if stored.state != "done":
             continue
-        spec, metrics = entry.spec, stored.result["metrics"]
+        spec, result = entry.spec, stored.result
+        metrics = result["metrics"]
         rows.append({
             "key": spec.key(), "sections": entry.sections, "method": spec.method,
             "task": spec.task, "reward": spec.reward, "seed": spec.seed,
@@ -52,6 +56,8 @@ def load_runs(profile: Profile, root: str | Path | None = None) -> pd.DataFrame:
             "expert_ratio": spec.data.expert_ratio if spec.data else None,
             "success_rate": metrics["success_rate"], "mean_return": metrics["mean_return"],
             "episodes": metrics["episodes"],
+            "std_return": _pooled_std(result.get("evaluations", [])),
+            "training": result.get("training", {}),
         })  # fmt: skip
     if not rows:
         raise GcdtError(
@@ -59,6 +65,17 @@ def load_runs(profile: Profile, root: str | Path | None = None) -> pd.DataFrame:
             f"`gcdt sweep --profile {profile.name}` (or `make reproduce PROFILE={profile.name}`)"
         )
     return pd.DataFrame(rows)
+
+
+def _pooled_std(evaluations: list[dict]) -> float:
+    """Standard deviation of the episode returns over all of a run's evaluation seeds."""
+    done = [e for e in evaluations if e["episodes"] and e["mean_return"] is not None]
+    n = sum(e["episodes"] for e in done)
+    if n < 2:
+        return float("nan")
+    mean = sum(e["episodes"] * e["mean_return"] for e in done) / n
+    square = sum(e["episodes"] * (e["std_return"] ** 2 + e["mean_return"] ** 2) for e in done)
+    return float(np.sqrt(max(square / n - mean**2, 0.0)))
 
 
 def bootstrap_ci(values: np.ndarray, seed: int = 0) -> tuple[float, float]:
@@ -72,6 +89,33 @@ def bootstrap_ci(values: np.ndarray, seed: int = 0) -> tuple[float, float]:
     return float(low), float(high)
 
 
+def wilson_ci(rate: float, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95 % Wilson score interval of a success rate measured on `n` episodes."""
+    if not n:
+        return float("nan"), float("nan")
+    centre = (rate + z**2 / (2 * n)) / (1 + z**2 / n)
+    half = z * np.sqrt(rate * (1 - rate) / n + z**2 / (4 * n**2)) / (1 + z**2 / n)
+    return float(centre - half), float(centre + half)
+
+
+def _interval(group: pd.DataFrame, metric: str, scale: float) -> tuple[float, float]:
+    """95 % interval of a cell's mean: over seeds (bootstrap) when it has several; with one
+    seed, over that run's evaluation episodes (Wilson for success, normal for return), since
+    a single value has no spread of its own."""
+    values = group[metric].dropna().to_numpy(dtype=np.float64)
+    if not len(values):
+        return np.nan, np.nan
+    if len(values) > 1:
+        return bootstrap_ci(values * scale)
+    run = group.iloc[0]
+    if metric == "success_rate":
+        low, high = wilson_ci(run["success_rate"], int(run["episodes"]))
+    else:
+        half = 1.96 * run["std_return"] / np.sqrt(max(int(run["episodes"]), 1))
+        low, high = run["mean_return"] - half, run["mean_return"] + half
+    return low * scale, high * scale
+
+
 def _aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
     rows = []
     for keys, group in runs.groupby(by, sort=False):
@@ -79,13 +123,27 @@ def _aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
         for metric, scale in (("mean_return", 1.0), ("success_rate", 100.0)):
             values = group[metric].dropna().to_numpy(dtype=np.float64) * scale
             name = "return" if metric == "mean_return" else "success"
-            low, high = bootstrap_ci(values) if len(values) else (np.nan, np.nan)
+            low, high = _interval(group, metric, scale)
             row |= {f"{name}_mean": values.mean() if len(values) else np.nan,
                     f"{name}_std": values.std(ddof=1) if len(values) > 1 else 0.0,
                     f"{name}_ci_low": low, f"{name}_ci_high": high}  # fmt: skip
         row["seeds"] = len(group)
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def datasets_table(runs: pd.DataFrame) -> pd.DataFrame:
+    """The distinct training datasets of the runs (size, expert share, and the summary each
+    run stored: episodes, mean length, success rate, mean returns), one row each."""
+    rows = {
+        (r.task, r.size, r.expert_ratio): {
+            "task": r.task, "size": r.size, "expert share": r.expert_ratio,
+            **{k: v for k, v in r.training["dataset"].items() if k not in ("source", "policy")},
+        }
+        for r in runs.itertuples()
+        if r.size is not None and r.training.get("dataset")
+    }  # fmt: skip
+    return pd.DataFrame([rows[k] for k in sorted(rows)])
 
 
 def table1(runs: pd.DataFrame) -> pd.DataFrame:

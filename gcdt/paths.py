@@ -31,8 +31,9 @@ OUTPUTS_ENV = "GCDT_OUTPUTS"
 
 def outputs_root() -> Path:
     """The folder holding `results/<profile>/` and `figures/<profile>/`: `$GCDT_OUTPUTS`, else
-    the repository (the published results)."""
-    return Path(os.environ.get(OUTPUTS_ENV) or REPO_ROOT)
+    the repository (the published results). Absolute, so that workers with another working
+    directory (Ray) write to the same place."""
+    return Path(os.environ.get(OUTPUTS_ENV) or REPO_ROOT).resolve()
 
 
 def results_dir(profile: str, root: str | Path | None = None) -> Path:

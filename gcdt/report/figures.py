@@ -44,25 +44,38 @@ def save(fig: plt.Figure, out_dir: str | Path, name: str) -> list[Path]:
     return paths
 
 
-def _success_panels(runs: pd.DataFrame, section: str, x: str, xlabel: str,
-                    scale: float = 1.0) -> plt.Figure | None:  # fmt: skip
+def _success_panels(
+    runs: pd.DataFrame, section: str, x: str, xlabel: str, scale: float = 1.0
+) -> plt.Figure | None:
     """Success rate (%) against `x`: one panel per reward, one line per task, std over seeds
     (None when no run belongs to `section`)."""
     sel = runs[runs["sections"].apply(lambda s: section in s) & (runs["method"] == "gcdt")]
     if sel.empty:
         return None
     rewards = [r for r in ("dense", "sparse") if r in set(sel["reward"])]
-    fig, axes = plt.subplots(1, len(rewards), figsize=(5 * len(rewards), 3.6), squeeze=False,
-                             sharey=True)  # fmt: skip
+    fig, axes = plt.subplots(
+        1, len(rewards), figsize=(5 * len(rewards), 3.6), squeeze=False, sharey=True
+    )
     for ax, reward in zip(axes[0], rewards, strict=True):
         for task in TASK_NAMES:
             cell = sel[(sel["reward"] == reward) & (sel["task"] == task)]
             if cell.empty:
                 continue
-            stats = (cell.assign(pct=100 * cell["success_rate"]).groupby(x)["pct"]
-                     .agg(["mean", "std"]).fillna(0.0).sort_index())  # fmt: skip
-            ax.errorbar(stats.index * scale, stats["mean"], yerr=stats["std"], marker="o",
-                        capsize=3, label=TASK_NAMES[task])  # fmt: skip
+            stats = (
+                cell.assign(pct=100 * cell["success_rate"])
+                .groupby(x)["pct"]
+                .agg(["mean", "std"])
+                .fillna(0.0)
+                .sort_index()
+            )
+            ax.errorbar(
+                stats.index * scale,
+                stats["mean"],
+                yerr=stats["std"],
+                marker="o",
+                capsize=3,
+                label=TASK_NAMES[task],
+            )
         ax.set_title(f"{reward.capitalize()} reward")
         ax.set_xlabel(xlabel)
         ax.set_ylim(-5, 105)
@@ -128,13 +141,25 @@ def architecture_figure(model_config: dict, task: str) -> plt.Figure:
         for j, (symbol, color) in enumerate(tokens):
             x = 0.4 + step * 3.5 + j * 1.05
             box(x, 0.3, 0.9, 0.6, f"${symbol}_{{{sub}}}$", color)
-            ax.annotate("", (x + 0.45, 1.6), (x + 0.45, 0.9),
-                        arrowprops={"arrowstyle": "->"})  # fmt: skip
-    box(0.4, 1.6, 10.1, 0.6, f"linear embeddings (hidden {hidden}) + timestep embedding, "
-        "LayerNorm (no positional embedding)", "#fff2cc")  # fmt: skip
-    box(0.4, 2.6, 10.1, 1.0, f"causal transformer: {layers} GPT-2 blocks, {heads} head(s), "
+            ax.annotate("", (x + 0.45, 1.6), (x + 0.45, 0.9), arrowprops={"arrowstyle": "->"})
+    box(
+        0.4,
+        1.6,
+        10.1,
+        0.6,
+        f"linear embeddings (hidden {hidden}) + timestep embedding, "
+        "LayerNorm (no positional embedding)",
+        "#fff2cc",
+    )
+    box(
+        0.4,
+        2.6,
+        10.1,
+        1.0,
+        f"causal transformer: {layers} GPT-2 blocks, {heads} head(s), "
         f"ReLU MLP, dropout {model_config['dropout']}, context K = {k} steps ({3 * k} tokens)",
-        "#eeeeee")  # fmt: skip
+        "#eeeeee",
+    )
     box(7.7, 4.2, 2.8, 0.6, "tanh action head on $s_t$ → $a_t$", "#d9ead3")
     ax.annotate("", (9.1, 4.2), (9.1, 3.6), arrowprops={"arrowstyle": "->"})
     state = (
@@ -146,8 +171,9 @@ def architecture_figure(model_config: dict, task: str) -> plt.Figure:
     return fig
 
 
-def learning_curves_figure(curves: dict[str, pd.DataFrame], x: str, y: str, xlabel: str,
-                           ylabel: str, title: str) -> plt.Figure:  # fmt: skip
+def learning_curves_figure(
+    curves: dict[str, pd.DataFrame], x: str, y: str, xlabel: str, ylabel: str, title: str
+) -> plt.Figure:
     """One line per labelled curve (TQC+HER success against env steps, DT loss, ...).
 
     Points are marked when a curve has few of them (a one-point curve is otherwise
@@ -156,9 +182,16 @@ def learning_curves_figure(curves: dict[str, pd.DataFrame], x: str, y: str, xlab
     fig, ax = plt.subplots(figsize=(7, 4))
     colours = plt.get_cmap("tab20").colors
     for i, (label, frame) in enumerate(curves.items()):
-        ax.plot(frame[x], frame[y] * (100 if y == "success_rate" else 1), label=label,
-                color=colours[i % len(colours)], marker="o" if len(frame) <= 30 else None,
-                markersize=4)  # fmt: skip
+        ax.plot(
+            frame[x],
+            frame[y] * (100 if y == "success_rate" else 1),
+            label=label,
+            color=colours[i % len(colours)],
+            marker="o" if len(frame) <= 30 else None,
+            markersize=4,
+        )
+    if y == "success_rate":
+        ax.set_ylim(-5, 105)  # the whole scale: a flat curve at 0 % reads as 0 %, not as noise
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
@@ -178,8 +211,14 @@ def tqc_learning_curves_figure(runs: pd.DataFrame) -> plt.Figure | None:
     }
     if not curves:
         return None
-    return learning_curves_figure(curves, "env_steps", "success_rate", "online env steps",
-                                  "success rate (%)", "TQC+HER learning curves")  # fmt: skip
+    return learning_curves_figure(
+        curves,
+        "env_steps",
+        "success_rate",
+        "online env steps",
+        "success rate (%)",
+        "TQC+HER learning curves",
+    )
 
 
 def training_loss_figure(runs: pd.DataFrame) -> plt.Figure | None:
@@ -192,8 +231,9 @@ def training_loss_figure(runs: pd.DataFrame) -> plt.Figure | None:
     }
     if not curves:
         return None
-    return learning_curves_figure(curves, "step", "loss", "gradient step", "action MSE",
-                                  "Offline training loss")  # fmt: skip
+    return learning_curves_figure(
+        curves, "step", "loss", "gradient step", "action MSE", "Offline training loss"
+    )
 
 
 def table1_architecture_figure(runs: pd.DataFrame) -> plt.Figure | None:

@@ -18,7 +18,7 @@ help:
 	@echo "make install    create $(VENV) from environment/ (no-op when up to date)"
 	@echo "make test       install, then run the test suite"
 	@echo "make lint       ruff over gcdt/, tests/ and benchmarks/"
-	@echo "make bench      throughput benchmarks -> results/bench/*.json"
+	@echo "make bench      throughput benchmarks -> results/bench/*.json, docs/benchmarks.md"
 	@echo "make bench-tqc  TQC+HER trained on Reach to success -> results/bench/tqc_her_reach.json"
 	@echo "make reproduce  PROFILE=smoke|quick|paper (default quick, ~1 h on 2 cores) [BACKEND=local|ray]:"
 	@echo "                re-run the grid and every notebook into $(REPRO_DIR)/, then check"
@@ -49,7 +49,7 @@ lint: install
 	$(VENV)/bin/ruff format --check gcdt tests benchmarks
 
 # Speed is measured here, never in unit tests. Do not run beside other heavy jobs: each
-# benchmark compares its cells side by side in one run, and the summary lands in README.md.
+# benchmark compares its cells side by side in one run, and the summary lands in docs/benchmarks.md.
 bench: install $(BENCH_STAMP)
 	$(PY) benchmarks/training_throughput.py
 	$(PY) benchmarks/evaluator_throughput.py --task push
@@ -59,7 +59,7 @@ bench: install $(BENCH_STAMP)
 	$(PY) benchmarks/tqc_her.py throughput --learning-steps 100
 	$(PY) benchmarks/run_costs.py
 	$(PY) benchmarks/end_to_end.py
-	$(PY) benchmarks/summary.py --readme
+	$(PY) benchmarks/summary.py --docs
 
 # The benchmarks' optional extra: HuggingFace transformers, the authors' model.
 $(BENCH_STAMP): $(STAMP) environment/bench-requirements.txt
@@ -69,7 +69,7 @@ $(BENCH_STAMP): $(STAMP) environment/bench-requirements.txt
 # TQC+HER trained on Reach (sparse and dense) to >= 95 % success: ~20 minutes on 2 cores.
 bench-tqc: install
 	$(PY) benchmarks/tqc_her.py reach
-	$(PY) benchmarks/summary.py --readme
+	$(PY) benchmarks/summary.py --docs
 
 # Re-run the profile: the grid's runs, then the notebooks in order (papermill), with results,
 # figures and executed notebooks in $(REPRO_DIR) (finished runs there are resumed, the published ones never

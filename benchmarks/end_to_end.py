@@ -39,8 +39,13 @@ def smoke_reproduce() -> float:
     with tempfile.TemporaryDirectory() as artifacts:
         env = {**os.environ, ARTIFACTS_ENV: artifacts}
         began = time.perf_counter()
-        subprocess.run(["make", "-s", "reproduce", "PROFILE=smoke"], cwd=REPO_ROOT, env=env,
-                       check=True, stdout=subprocess.DEVNULL)  # fmt: skip
+        subprocess.run(
+            ["make", "-s", "reproduce", "PROFILE=smoke"],
+            cwd=REPO_ROOT,
+            env=env,
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
         return time.perf_counter() - began
 
 
@@ -81,10 +86,14 @@ def main() -> None:
     results: dict[str, Any] = {"quick_grid": quick_costs()}
     if not args.skip_smoke:
         results["make_reproduce_smoke_seconds"] = round(smoke_reproduce(), 1)
-    write_report("end_to_end", "end_to_end.py", {
-        "unit": "seconds (wall) unless named otherwise",
-        "results": results,
-    })  # fmt: skip
+    write_report(
+        "end_to_end",
+        "end_to_end.py",
+        {
+            "unit": "seconds (wall) unless named otherwise",
+            "results": results,
+        },
+    )
 
 
 if __name__ == "__main__":

@@ -84,8 +84,14 @@ def _authors_model(ckpt: dict, device: str) -> tuple[Callable[..., torch.Tensor]
     )
 
     def forward(states, actions, rtg, timesteps, mask):
-        return hf(states=states, actions=actions, returns_to_go=rtg, timesteps=timesteps,
-                  attention_mask=mask.long(), return_dict=False)[1]  # fmt: skip
+        return hf(
+            states=states,
+            actions=actions,
+            returns_to_go=rtg,
+            timesteps=timesteps,
+            attention_mask=mask.long(),
+            return_dict=False,
+        )[1]
 
     return forward, f"transformers {transformers.__version__} DecisionTransformerModel"
 
@@ -196,8 +202,9 @@ def main() -> None:
             """Steps/s of `evaluate`; with `in_loop`, also the policy's ms per vector step
             appended to that sample list."""
             timed = _Timed(policy)
-            result = evaluate(timed, task, "sparse", timesteps=timesteps, n_envs=n_envs,
-                              progress=False)  # fmt: skip
+            result = evaluate(
+                timed, task, "sparse", timesteps=timesteps, n_envs=n_envs, progress=False
+            )
             if in_loop is not None:
                 samples[in_loop].append(1e3 * timed.seconds / -(-timesteps // n_envs))
             return result.summary["steps_per_second"]

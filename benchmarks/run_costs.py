@@ -36,12 +36,17 @@ def _worker(args: tuple[str, int, int, int, int]) -> dict[str, float]:
     with tempfile.TemporaryDirectory() as tmp:
         for method, steps in (("dt", dt_steps), ("bc", bc_steps)):
             began = time.perf_counter()
-            result = train(dataset, TrainConfig(method=method, steps=steps, seed=seed),
-                           Path(tmp) / method, progress=False)  # fmt: skip
+            result = train(
+                dataset,
+                TrainConfig(method=method, steps=steps, seed=seed),
+                Path(tmp) / method,
+                progress=False,
+            )
             out[f"{method}_seconds_per_step"] = (time.perf_counter() - began) / result.steps
             policy = TrainedPolicy(result.checkpoint, dataset.task)
-            summary = evaluate(policy, dataset.task, "sparse", timesteps=eval_steps, seed=seed,
-                               progress=False).summary  # fmt: skip
+            summary = evaluate(
+                policy, dataset.task, "sparse", timesteps=eval_steps, seed=seed, progress=False
+            ).summary
             out[f"{method}_eval_steps_per_second"] = summary["steps_per_second"]
     return out
 
@@ -60,10 +65,16 @@ def main() -> None:
         with mp.get_context("spawn").Pool(2) as pool:
             cells = pool.map(_worker, jobs)
     results = {k: round(median(c[k] for c in cells), 5) for k in cells[0]}
-    write_report("run_costs", "run_costs.py", {
-        "layout": "2 runs in parallel, 1 torch thread each (a local sweep on 2 cores)",
-        "task": "pick_and_place", "results": results, "workers": cells,
-    })  # fmt: skip
+    write_report(
+        "run_costs",
+        "run_costs.py",
+        {
+            "layout": "2 runs in parallel, 1 torch thread each (a local sweep on 2 cores)",
+            "task": "pick_and_place",
+            "results": results,
+            "workers": cells,
+        },
+    )
 
 
 if __name__ == "__main__":

@@ -1,9 +1,9 @@
-"""Markdown tables of results/bench/*.json, optionally written into the README.
+"""Markdown tables of results/bench/*.json, optionally written into docs/benchmarks.md.
 
-    python benchmarks/summary.py            # print
-    python benchmarks/summary.py --readme   # replace the block between the bench markers
+    python benchmarks/summary.py          # print
+    python benchmarks/summary.py --docs   # replace the block between the bench markers
 
-The README's benchmark numbers come only from here, so they are always those of the JSON
+The documented benchmark numbers come only from here, so they are always those of the JSON
 files `make bench` wrote.
 """
 
@@ -53,19 +53,37 @@ def _training_targets(train: dict | None) -> list[list]:
     if res.get("speedup_vs_huggingface_fp32") is not None:
         x = res["speedup_vs_huggingface_fp32"]
         cpu = train.get("device", "cpu") == "cpu"
-        rows.append(["DT training step vs HF `DecisionTransformerModel`, fp32", f"{x:.2f}x",
-                     ">= 1.5x" if cpu else "- (1.5x on CPU)",
-                     _verdict(x >= 1.5) if cpu else "-"])  # fmt: skip
+        rows.append(
+            [
+                "DT training step vs HF `DecisionTransformerModel`, fp32",
+                f"{x:.2f}x",
+                ">= 1.5x" if cpu else "- (1.5x on CPU)",
+                _verdict(x >= 1.5) if cpu else "-",
+            ]
+        )
     if res.get("speedup_vs_huggingface_bf16") is not None:
         x = res["speedup_vs_huggingface_bf16"]
         rows.append(["DT training step vs HF, bf16 autocast", f"{x:.2f}x", "-", "-"])
     if res.get("speedup_vs_huggingface_fp32_short") is not None:
         x = res["speedup_vs_huggingface_fp32_short"]
-        rows.append(["DT training step vs HF, fp32, 13-step episodes (the quick profile's "
-                     "PickAndPlace length)", f"{x:.2f}x", "-", "-"])  # fmt: skip
+        rows.append(
+            [
+                "DT training step vs HF, fp32, 13-step episodes (the quick profile's "
+                "PickAndPlace length)",
+                f"{x:.2f}x",
+                "-",
+                "-",
+            ]
+        )
     share = res["dt_sampler_share"]
-    rows.append(["batch sampling, share of a DT step", f"{100 * share:.1f} %", "<= 5 %",
-                 _verdict(share <= 0.05)])  # fmt: skip
+    rows.append(
+        [
+            "batch sampling, share of a DT step",
+            f"{100 * share:.1f} %",
+            "<= 5 %",
+            _verdict(share <= 0.05),
+        ]
+    )
     return rows
 
 
@@ -79,18 +97,30 @@ def _evaluator_targets(ev: dict | None) -> list[list]:
         res[f"evaluate_gcdt_{n}_envs_vs_authors"],
     )
     ceiling = res[f"raw_vector_{n}_envs"] / res["authors_unbatched"]
-    bound = (f"; simulator + forward pass alone: {_pct(res[f'bound_{n}_envs_vs_raw'])}, "
-             f"{res[f'bound_{n}_envs_vs_authors']:.1f}x" if f"bound_{n}_envs" in res
-             else "")  # fmt: skip
+    bound = (
+        f"; simulator + forward pass alone: {_pct(res[f'bound_{n}_envs_vs_raw'])}, "
+        f"{res[f'bound_{n}_envs_vs_authors']:.1f}x"
+        if f"bound_{n}_envs" in res
+        else ""
+    )
     if f"evaluate_random_{n}_envs_vs_raw" in res:
         own = res[f"evaluate_random_{n}_envs_vs_raw"]
         bound += f"; `evaluate` with random actions: {_pct(own)}"
     return [
-        [f"`evaluate` GC-DT on {n} envs vs raw random stepping of {n} envs (Push{bound})",
-         _pct(vs_raw), ">= 70 %", _verdict(vs_raw >= 0.7)],
-        [f"`evaluate` GC-DT on {n} envs vs the authors' unbatched loop (Push; the simulator "
-         f"alone is {ceiling:.1f}x)", f"{vs_authors:.1f}x", ">= 4x", _verdict(vs_authors >= 4)],
-    ]  # fmt: skip
+        [
+            f"`evaluate` GC-DT on {n} envs vs raw random stepping of {n} envs (Push{bound})",
+            _pct(vs_raw),
+            ">= 70 %",
+            _verdict(vs_raw >= 0.7),
+        ],
+        [
+            f"`evaluate` GC-DT on {n} envs vs the authors' unbatched loop (Push; the simulator "
+            f"alone is {ceiling:.1f}x)",
+            f"{vs_authors:.1f}x",
+            ">= 4x",
+            _verdict(vs_authors >= 4),
+        ],
+    ]
 
 
 def targets_section() -> str | None:
@@ -106,14 +136,26 @@ def targets_section() -> str | None:
             res[f"collect_scripted_{n}_envs_vs_raw"],
             res[f"collect_scripted_{n}_envs_vs_raw_scripted"],
         )
-        rows.append([f"collection, scripted expert vs raw random stepping, {n} processes ({t}; "
-                     f"vs the expert stepped without recording: {_pct(own)})", _pct(x),
-                     ">= 80 %", _verdict(x >= 0.8)])  # fmt: skip
+        rows.append(
+            [
+                f"collection, scripted expert vs raw random stepping, {n} processes ({t}; "
+                f"vs the expert stepped without recording: {_pct(own)})",
+                _pct(x),
+                ">= 80 %",
+                _verdict(x >= 0.8),
+            ]
+        )
     io = _load("dataset_io_push")
     if io is not None:
         x = io["results"]["load_training_ready_seconds"]
-        rows.append([f"load {io['results']['transitions']:,} transitions to training-ready arrays",
-                     f"{x:.2f} s", "< 3 s", _verdict(x < 3)])  # fmt: skip
+        rows.append(
+            [
+                f"load {io['results']['transitions']:,} transitions to training-ready arrays",
+                f"{x:.2f} s",
+                "< 3 s",
+                _verdict(x < 3),
+            ]
+        )
     e2e = _load("end_to_end")
     if e2e is not None and "make_reproduce_smoke_seconds" in e2e["results"]:
         x = e2e["results"]["make_reproduce_smoke_seconds"]
@@ -131,25 +173,44 @@ def evaluator_section(name: str = "evaluator_throughput_push") -> str | None:
         return None
     n, res = r["envs"], r["results"]
     rows = [
-        [f"raw vector env, {n} processes, random actions (ceiling)",
-         f"{res[f'raw_vector_{n}_envs']:.0f}"],
+        [
+            f"raw vector env, {n} processes, random actions (ceiling)",
+            f"{res[f'raw_vector_{n}_envs']:.0f}",
+        ],
         [f"`evaluate`, GC-DT, {n} envs", f"{res[f'evaluate_gcdt_{n}_envs']:.0f}"],
-        ["`evaluate`, GC-DT, 1 env (as a local sweep runs it)",
-         f"{res['evaluate_gcdt_1_envs']:.0f}"],
-        [f"authors' loop: 1 env, context re-padded every step ({r['authors_model']})",
-         f"{res['authors_unbatched']:.0f}"],
-    ]  # fmt: skip
+        [
+            "`evaluate`, GC-DT, 1 env (as a local sweep runs it)",
+            f"{res['evaluate_gcdt_1_envs']:.0f}",
+        ],
+        [
+            f"authors' loop: 1 env, context re-padded every step ({r['authors_model']})",
+            f"{res['authors_unbatched']:.0f}",
+        ],
+    ]
     if f"bound_{n}_envs" in res:
-        rows.append([f"raw vector env, {n} processes, plus one GC-DT forward pass per step "
-                     f"({res[f'predict_ms_{n}_envs']:.1f} ms): a synchronous evaluator's bound",
-                     f"{res[f'bound_{n}_envs']:.0f}"])  # fmt: skip
+        rows.append(
+            [
+                f"raw vector env, {n} processes, plus one GC-DT forward pass per step "
+                f"({res[f'predict_ms_{n}_envs']:.1f} ms): a synchronous evaluator's bound",
+                f"{res[f'bound_{n}_envs']:.0f}",
+            ]
+        )
     if f"evaluate_random_{n}_envs" in res:
-        rows.insert(1, [f"`evaluate`, random actions, {n} envs (the evaluator's own cost)",
-                        f"{res[f'evaluate_random_{n}_envs']:.0f}"])  # fmt: skip
+        rows.insert(
+            1,
+            [
+                f"`evaluate`, random actions, {n} envs (the evaluator's own cost)",
+                f"{res[f'evaluate_random_{n}_envs']:.0f}",
+            ],
+        )
     if f"predict_in_loop_ms_{n}_envs" in res:
-        rows.append([f"GC-DT forward pass per step inside `evaluate`, ms (alone: "
-                     f"{res[f'predict_ms_{n}_envs']:.1f} ms with a full context)",
-                     f"{res[f'predict_in_loop_ms_{n}_envs']:.1f} ms"])  # fmt: skip
+        rows.append(
+            [
+                f"GC-DT forward pass per step inside `evaluate`, ms (alone: "
+                f"{res[f'predict_ms_{n}_envs']:.1f} ms with a full context)",
+                f"{res[f'predict_in_loop_ms_{n}_envs']:.1f} ms",
+            ]
+        )
     return (
         f"Evaluation throughput on Push, env steps/s, resets included "
         f"(`benchmarks/evaluator_throughput.py`, {r['torch_threads']} torch threads):\n\n"
@@ -164,13 +225,20 @@ def collection_section() -> str | None:
         if r is None or "envs" not in r:
             continue
         n, res = r["envs"], r["results"]
-        rows.append([
-            t, n, f"{res[f'raw_vector_{n}_envs']:.0f}",
-            _rate(res, f"collect_random_{n}_envs", f"collect_random_{n}_envs_vs_raw"),
-            _rate(res, f"collect_scripted_{n}_envs", f"collect_scripted_{n}_envs_vs_raw"),
-            _rate(res, f"raw_vector_scripted_{n}_envs",
-                  f"collect_scripted_{n}_envs_vs_raw_scripted"),
-        ])  # fmt: skip
+        rows.append(
+            [
+                t,
+                n,
+                f"{res[f'raw_vector_{n}_envs']:.0f}",
+                _rate(res, f"collect_random_{n}_envs", f"collect_random_{n}_envs_vs_raw"),
+                _rate(res, f"collect_scripted_{n}_envs", f"collect_scripted_{n}_envs_vs_raw"),
+                _rate(
+                    res,
+                    f"raw_vector_scripted_{n}_envs",
+                    f"collect_scripted_{n}_envs_vs_raw_scripted",
+                ),
+            ]
+        )
     if not rows:
         return None
     return (
@@ -236,8 +304,11 @@ def training_section(name: str = "training_throughput") -> str | None:
         ("huggingface_fp32_short", "GC-DT, HF (authors), fp32, 13-step episodes"),
         ("bc_fp32", "BC, fp32"),
     )
-    rows = [[label, f"{res[f'{k}_ms_per_step']:.1f}", f"{res[f'{k}_samples_per_second']:.0f}"]
-            for k, label in cells if f"{k}_ms_per_step" in res]  # fmt: skip
+    rows = [
+        [label, f"{res[f'{k}_ms_per_step']:.1f}", f"{res[f'{k}_samples_per_second']:.0f}"]
+        for k, label in cells
+        if f"{k}_ms_per_step" in res
+    ]
     return (
         f"Training step, batch 64, the paper's DT config (`benchmarks/training_throughput.py`, "
         f"{r['torch_threads']} torch threads, {r['huggingface']}):\n\n"
@@ -250,9 +321,16 @@ def end_to_end_section() -> str | None:
     if r is None:
         return None
     q = r["results"]["quick_grid"]
-    rows = [[k, f"{v / 60:.1f}", f"{q['measured_seconds_per_run'][k] / 60:.1f}"
-             if k in q["measured_seconds_per_run"] else "-"]
-            for k, v in q["estimated_seconds_per_run"].items()]  # fmt: skip
+    rows = [
+        [
+            k,
+            f"{v / 60:.1f}",
+            f"{q['measured_seconds_per_run'][k] / 60:.1f}"
+            if k in q["measured_seconds_per_run"]
+            else "-",
+        ]
+        for k, v in q["estimated_seconds_per_run"].items()
+    ]
     return (
         f"The quick grid's cost per run, minutes (`benchmarks/end_to_end.py`; estimated from "
         f"the benchmarks' rates, and measured from {q['measured_runs']} finished runs in "
@@ -266,10 +344,15 @@ def tqc_section() -> str | None:
     parts = []
     if speed is not None:
         rows = [
-            [name, "x".join(map(str, c["net_arch"])), c["batch_size"],
-             f"{c['learning_steps_per_second']:.1f}", f"{c['hours_for_paper_budget']:.1f}"]
+            [
+                name,
+                "x".join(map(str, c["net_arch"])),
+                c["batch_size"],
+                f"{c['learning_steps_per_second']:.1f}",
+                f"{c['hours_for_paper_budget']:.1f}",
+            ]
             for name, c in speed["configs"].items()
-        ]  # fmt: skip
+        ]
         parts.append(
             f"TQC+HER training speed on {speed['task']}, env steps/s once gradient steps run "
             "(`benchmarks/tqc_her.py throughput`; hours: the paper's step budget of that task "
@@ -278,12 +361,16 @@ def tqc_section() -> str | None:
         )
     if reach is not None:
         rows = [
-            [reward, r["env_steps"], f"{r['train_minutes']:.1f}",
-             f"{100 * r['evaluation_10k_steps']['final']['success_rate']:.1f} %",
-             f"{r['evaluation_10k_steps']['final']['mean_return']:.2f}",
-             f"{100 * r['evaluation_10k_steps']['best']['success_rate']:.1f} %"]
+            [
+                reward,
+                r["env_steps"],
+                f"{r['train_minutes']:.1f}",
+                f"{100 * r['evaluation_10k_steps']['final']['success_rate']:.1f} %",
+                f"{r['evaluation_10k_steps']['final']['mean_return']:.2f}",
+                f"{100 * r['evaluation_10k_steps']['best']['success_rate']:.1f} %",
+            ]
             for reward, r in reach["runs"].items()
-        ]  # fmt: skip
+        ]
         parts.append(
             f"TQC+HER on Reach, config `{reach['config']}` (`make bench-tqc`; success and "
             "return of the final and best models under the paper's 10,000-step evaluation):"
@@ -340,7 +427,7 @@ def summary() -> str:
     machine = next((r["machine"] for r in map(_load, cpu_runs) if r), {})
     bf16 = {True: ", native bf16", False: ", bf16 emulated"}.get(machine.get("cpu_bf16"), "")
     head = (
-        f"Generated by `python benchmarks/summary.py --readme` from `results/bench/` "
+        f"Generated by `python benchmarks/summary.py --docs` from `results/bench/` "
         f"({machine.get('cpu', 'CPU')}{bf16}, {machine.get('cores', '?')} cores, "
         f"{machine.get('device', 'cpu')}, torch {machine.get('torch', '?')})."
     )
@@ -349,18 +436,18 @@ def summary() -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--readme", action="store_true", help="update README.md in place")
+    parser.add_argument("--docs", action="store_true", help="update docs/benchmarks.md in place")
     args = parser.parse_args()
     text = summary()
-    if not args.readme:
+    if not args.docs:
         print(text)
         return
-    readme = REPO_ROOT / "README.md"
-    old = readme.read_text()
+    page = REPO_ROOT / "docs" / "benchmarks.md"
+    old = page.read_text()
     if START not in old or END not in old:
-        raise SystemExit(f"README.md lacks the markers {START} ... {END}")
+        raise SystemExit(f"{page} lacks the markers {START} ... {END}")
     block = f"{START}\n{text}\n{END}"
-    readme.write_text(
+    page.write_text(
         re.sub(re.escape(START) + ".*?" + re.escape(END), lambda _: block, old, flags=re.S)
     )
 

@@ -41,9 +41,14 @@ def throughput(task: str, learning_steps: int) -> dict:
         out = Path(tempfile.mkdtemp(prefix=f"tqc_{name}_"))
         try:
             result = train_tqc(
-                task, "sparse", cfg, out / "run", eval_every=cfg.steps, eval_episodes=1,
+                task,
+                "sparse",
+                cfg,
+                out / "run",
+                eval_every=cfg.steps,
+                eval_episodes=1,
                 progress=False,
-            )  # fmt: skip
+            )
         finally:
             shutil.rmtree(out)
         cells[name] = {

@@ -54,15 +54,23 @@ def _dataset(episodes: int = 1000, length: int = 50):
         r = compute_rewards(ag[1:], np.repeat(goal[None], length, 0), "pick_and_place")
         truncated = np.zeros(length, bool)
         truncated[-1] = True
-        eps.append({
-            "observation": rng.normal(size=(length, 19)).astype(np.float32),
-            "desired_goal": np.repeat(goal[None], length, 0), "achieved_goal": ag[:-1],
-            "action": rng.uniform(-1, 1, (length, 4)).astype(np.float32),
-            "reward_sparse": r["sparse"], "reward_dense": r["dense"],
-            "terminated": np.zeros(length, bool), "truncated": truncated,
-            "success": np.zeros(length, bool), "final_observation": np.zeros(19, np.float32),
-            "final_desired_goal": goal, "final_achieved_goal": ag[-1], "episode_seed": e,
-        })  # fmt: skip
+        eps.append(
+            {
+                "observation": rng.normal(size=(length, 19)).astype(np.float32),
+                "desired_goal": np.repeat(goal[None], length, 0),
+                "achieved_goal": ag[:-1],
+                "action": rng.uniform(-1, 1, (length, 4)).astype(np.float32),
+                "reward_sparse": r["sparse"],
+                "reward_dense": r["dense"],
+                "terminated": np.zeros(length, bool),
+                "truncated": truncated,
+                "success": np.zeros(length, bool),
+                "final_observation": np.zeros(19, np.float32),
+                "final_desired_goal": goal,
+                "final_achieved_goal": ag[-1],
+                "episode_seed": e,
+            }
+        )
     return from_episodes("pick_and_place", eps, {"source": "benchmark"})
 
 
@@ -94,10 +102,19 @@ def _huggingface(bf16: bool, dim: int, batches: list[dict[str, torch.Tensor]]):
 
     torch.manual_seed(0)
     config = transformers.DecisionTransformerConfig(
-        state_dim=dim, act_dim=4, hidden_size=128, n_layer=3, n_head=1, n_inner=None,
-        activation_function="relu", resid_pdrop=0.1, embd_pdrop=0.1, attn_pdrop=0.1,
-        max_ep_len=1000, action_tanh=True,
-    )  # fmt: skip
+        state_dim=dim,
+        act_dim=4,
+        hidden_size=128,
+        n_layer=3,
+        n_head=1,
+        n_inner=None,
+        activation_function="relu",
+        resid_pdrop=0.1,
+        embd_pdrop=0.1,
+        attn_pdrop=0.1,
+        max_ep_len=1000,
+        action_tanh=True,
+    )
     device = batches[0]["states"].device
     model = transformers.DecisionTransformerModel(config).to(device).train()
     opt = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=1e-4)
@@ -106,9 +123,13 @@ def _huggingface(bf16: bool, dim: int, batches: list[dict[str, torch.Tensor]]):
         b = batches[i % len(batches)]
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
             _, pred, _ = model(
-                states=b["states"], actions=b["actions"], returns_to_go=b["returns_to_go"],
-                timesteps=b["timesteps"], attention_mask=b["mask"].long(), return_dict=False,
-            )  # fmt: skip
+                states=b["states"],
+                actions=b["actions"],
+                returns_to_go=b["returns_to_go"],
+                timesteps=b["timesteps"],
+                attention_mask=b["mask"].long(),
+                return_dict=False,
+            )
             keep = b["mask"].reshape(-1)  # the authors' loss: real tokens only
             loss = torch.mean((pred.reshape(-1, 4)[keep] - b["actions"].reshape(-1, 4)[keep]) ** 2)
         opt.zero_grad()
@@ -167,8 +188,15 @@ def main() -> None:
             samples[key].append(_time(make(), steps, warmup, device))
     ms = {k: float(np.median(v)) for k, v in samples.items()}
     results: dict[str, float | None] = {}
-    for key in ("gcdt_fp32", "gcdt_bf16", "huggingface_fp32", "huggingface_bf16",
-                "gcdt_fp32_short", "huggingface_fp32_short", "bc_fp32"):  # fmt: skip
+    for key in (
+        "gcdt_fp32",
+        "gcdt_bf16",
+        "huggingface_fp32",
+        "huggingface_bf16",
+        "gcdt_fp32_short",
+        "huggingface_fp32_short",
+        "bc_fp32",
+    ):
         if key in ms:
             results[f"{key}_ms_per_step"] = round(ms[key], 2)
             results[f"{key}_samples_per_second"] = round(64e3 / ms[key], 1)

@@ -97,11 +97,16 @@ def _build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
     ev.add_argument("--seed", type=_int_at_least(0), default=0)
     ev.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
-    ev.add_argument("--target-return", type=float, metavar="R",
-                    help="a DT checkpoint's target return at each episode's start (default 0, "
-                    "the paper's)")  # fmt: skip
-    ev.add_argument("--device", help="where a DT or BC checkpoint runs: auto (the default, "
-                    "CUDA when present), cpu or cuda")  # fmt: skip
+    ev.add_argument(
+        "--target-return",
+        type=float,
+        metavar="R",
+        help="a DT checkpoint's target return at each episode's start (default 0, the paper's)",
+    )
+    ev.add_argument(
+        "--device",
+        help="where a DT or BC checkpoint runs: auto (the default, CUDA when present), cpu or cuda",
+    )
     ev.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     ev.add_argument(
         "--out",
@@ -203,9 +208,13 @@ def _build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--device", default="auto", help="auto (CUDA when present), cpu, cuda")
     tr.add_argument("--bf16", action="store_true", help="bfloat16 autocast")
     tr.add_argument("--resume", action="store_true", help="continue from --out/checkpoint.pt")
-    tr.add_argument("--checkpoint-seconds", type=float, metavar="S",
-                    help="checkpoint (and write train_log.csv) at least every S seconds, as well "
-                    "as every 1000 steps (default 30)")  # fmt: skip
+    tr.add_argument(
+        "--checkpoint-seconds",
+        type=float,
+        metavar="S",
+        help="checkpoint (and write train_log.csv) at least every S seconds, as well "
+        "as every 1000 steps (default 30)",
+    )
     tr.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     tr.set_defaults(run=_train)
 
@@ -262,11 +271,19 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     rp.add_argument("--profile", required=True, choices=list(PROFILES))
     rp.add_argument("--readme", action="store_true", help="also update README.md's results")
-    rp.add_argument("--wall-seconds", type=float, metavar="S",
-                    help="record S as the wall time of the `make reproduce` that made these "
-                    "results (results/PROFILE/reproduce.json)")  # fmt: skip
-    rp.add_argument("--backend", default="local", choices=list(BACKENDS),
-                    help="the backend of that `make reproduce` (with --wall-seconds)")  # fmt: skip
+    rp.add_argument(
+        "--wall-seconds",
+        type=float,
+        metavar="S",
+        help="record S as the wall time of the `make reproduce` that made these "
+        "results (results/PROFILE/reproduce.json)",
+    )
+    rp.add_argument(
+        "--backend",
+        default="local",
+        choices=list(BACKENDS),
+        help="the backend of that `make reproduce` (with --wall-seconds)",
+    )
     rp.set_defaults(run=_report_cmd)
 
     cmp = sub.add_parser(
@@ -277,9 +294,14 @@ def _build_parser() -> argparse.ArgumentParser:
         "Writes results/PROFILE/reproduction_check.{csv,md} under --ours.",
     )
     cmp.add_argument("--profile", required=True, choices=list(PROFILES))
-    cmp.add_argument("--ours", type=Path, metavar="DIR", help="the reproduction's folder, "
-                     "holding results/PROFILE/runs/ (default: $GCDT_OUTPUTS, else "
-                     "artifacts/reproduce)")  # fmt: skip
+    cmp.add_argument(
+        "--ours",
+        type=Path,
+        metavar="DIR",
+        help="the reproduction's folder, "
+        "holding results/PROFILE/runs/ (default: $GCDT_OUTPUTS, else "
+        "artifacts/reproduce)",
+    )
     cmp.set_defaults(run=_compare)
 
     pb = sub.add_parser(
@@ -289,9 +311,13 @@ def _build_parser() -> argparse.ArgumentParser:
         "into the repository's; unchanged files are left untouched.",
     )
     pb.add_argument("--profile", required=True, choices=list(PROFILES))
-    pb.add_argument("--from", dest="source", type=Path, metavar="DIR",
-                    help="the reproduction's folder (default: $GCDT_OUTPUTS, else "
-                    "artifacts/reproduce)")  # fmt: skip
+    pb.add_argument(
+        "--from",
+        dest="source",
+        type=Path,
+        metavar="DIR",
+        help="the reproduction's folder (default: $GCDT_OUTPUTS, else artifacts/reproduce)",
+    )
     pb.set_defaults(run=_publish)
     return parser
 
@@ -528,8 +554,10 @@ def _sweep(args: argparse.Namespace) -> int:
         for warning in warnings:
             print(f"warning: {warning}", file=sys.stderr)
         for p in planned:
-            print(f"{p.key}  {p.state:<8} {p.estimate_seconds / 60:8.1f} min  "
-                  f"{p.entry.spec.label}  [{', '.join(p.entry.sections)}]")  # fmt: skip
+            print(
+                f"{p.key}  {p.state:<8} {p.estimate_seconds / 60:8.1f} min  "
+                f"{p.entry.spec.label}  [{', '.join(p.entry.sections)}]"
+            )
         todo = [p for p in planned if p.state != "done"]
         workers = args.workers or default_workers(profile)
         total = sum(p.estimate_seconds for p in todo) + shared_cost(todo, costs)

@@ -1,6 +1,6 @@
 """The paper's panda-gym tasks behind one factory, plus the goal-conditioned state and rewards.
 
-Facts this module encodes (DESIGN.md §3):
+Facts this module encodes (also listed in docs/architecture.md):
 
 * panda-gym 3.0.7 re-seeds the task RNG on *every* `reset`, from OS entropy when no seed is
   given, so a seed-less reset is never reproducible. Every episode we run is therefore reset

@@ -1,6 +1,6 @@
 """The one evaluator every method is measured with (experts, GC-DT, DT, BC, TQC+HER).
 
-Protocol (the authors' evaluation, DESIGN.md §3): run exactly `timesteps` env steps in total
+Protocol (the authors' evaluation, from their code): run exactly `timesteps` env steps in total
 over the vector of envs, count every episode that finished within them and drop the unfinished
 tails; an episode succeeds if the success condition held at any of its steps; its return is the
 sum of its rewards. Alternatively, run a fixed number of whole episodes.
@@ -229,8 +229,14 @@ def record_rollout(
     if path is not None:
         images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
         gif = io.BytesIO()
-        images[0].save(gif, format="GIF", save_all=True, append_images=images[1:],
-                       duration=int(1000 / fps), loop=0)  # fmt: skip
+        images[0].save(
+            gif,
+            format="GIF",
+            save_all=True,
+            append_images=images[1:],
+            duration=int(1000 / fps),
+            loop=0,
+        )
         write_if_changed(path, gif.getvalue())  # atomic; an unchanged GIF is left untouched
     return frames
 

@@ -1,7 +1,7 @@
 """The Goal-Conditioned Decision Transformer, its ablations, and the BC baseline.
 
 `GoalConditionedDT` follows the authors' model, HuggingFace `DecisionTransformerModel`
-(DESIGN.md §3): tokens (return-to-go, state, action) per step, a learned timestep embedding
+(their public code): tokens (return-to-go, state, action) per step, a learned timestep embedding
 added to each token, LayerNorm after the embeddings, GPT-2 blocks (pre-LayerNorm, ReLU MLP of
 4x width, final LayerNorm), and the action predicted from each state token through tanh.
 Attention runs through PyTorch's scaled_dot_product_attention, except when training on CPU

@@ -1,6 +1,6 @@
 """One trainer for every method: the (GC-)DT and BC, from an offline `Dataset`.
 
-The authors' recipe (DESIGN.md §3): AdamW (lr 1e-4, weight decay 1e-4), linear warm-up over
+The authors' recipe (their public code): AdamW (lr 1e-4, weight decay 1e-4), linear warm-up over
 10 % of the steps then linear decay, gradient-norm clip 0.25, batch 64, returns-to-go divided
 by 100, states z-normalised with the dataset's mean and std, K-step windows left-padded.
 Windows start at a transition drawn uniformly from the whole dataset, which is exactly the
@@ -130,8 +130,14 @@ class WindowSampler:
     All arrays live on the device once; a batch is an index computation and one gather.
     """
 
-    def __init__(self, dataset: Dataset, cfg: TrainConfig, mean: np.ndarray, std: np.ndarray,
-                 device: torch.device) -> None:  # fmt: skip
+    def __init__(
+        self,
+        dataset: Dataset,
+        cfg: TrainConfig,
+        mean: np.ndarray,
+        std: np.ndarray,
+        device: torch.device,
+    ) -> None:
         cols = state_columns(dataset.task, cfg.goal_conditioning)
         states = (dataset.states[:, cols] - mean) / std
         rtg = dataset.returns_to_go(cfg.reward) / cfg.return_scale
@@ -191,11 +197,13 @@ def keep_freed_memory() -> bool:
         return False
     libc = ctypes.CDLL(None)
     m_trim_threshold, m_top_pad, m_mmap_threshold = -1, -2, -3  # <malloc.h>
-    return all((
-        libc.mallopt(m_mmap_threshold, 32 << 20),  # glibc's maximum on 64-bit
-        libc.mallopt(m_trim_threshold, 1 << 30),
-        libc.mallopt(m_top_pad, 64 << 20),
-    ))  # fmt: skip
+    return all(
+        (
+            libc.mallopt(m_mmap_threshold, 32 << 20),  # glibc's maximum on 64-bit
+            libc.mallopt(m_trim_threshold, 1 << 30),
+            libc.mallopt(m_top_pad, 64 << 20),
+        )
+    )
 
 
 def make_optimizer(model: torch.nn.Module, cfg: TrainConfig) -> torch.optim.Optimizer:
@@ -265,8 +273,11 @@ def train(
     total = cfg.total_steps(dataset.n_episodes)
     state_dim, action_dim = cols.stop, dataset.spec.action_dim
     if cfg.method == "dt":
-        model_config = asdict(DTConfig(state_dim, action_dim, cfg.context, cfg.hidden, cfg.layers,
-                                       cfg.heads, cfg.dropout))  # fmt: skip
+        model_config = asdict(
+            DTConfig(
+                state_dim, action_dim, cfg.context, cfg.hidden, cfg.layers, cfg.heads, cfg.dropout
+            )
+        )
     else:
         model_config = asdict(BCConfig(state_dim, action_dim, cfg.hidden, cfg.layers, cfg.dropout))
 
@@ -307,24 +318,46 @@ def train(
         nonlocal last_save
         # The log first: wherever a checkpoint exists, a log at least as recent does too.
         _write_log(log_path, history)
-        save_checkpoint(ckpt_path, {
-            "format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION,
-            "method": cfg.method, "task": dataset.task, "train_config": asdict(cfg),
-            "model_config": model_config, "model": model.state_dict(),
-            "optimizer": optimizer.state_dict(), "schedule": schedule.state_dict(),
-            "state_mean": torch.as_tensor(mean), "state_std": torch.as_tensor(std),
-            "rng": {"numpy": rng.bit_generator.state, "torch": torch.get_rng_state(),
-                    "cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None},
-            "step": step, "total_steps": total, "complete": complete, "history": history,
-            "log_window": [window_loss, window_steps],
-            "dataset": dataset.summary(), "created": utc_now(), "versions": package_versions(),
-        })  # fmt: skip
+        save_checkpoint(
+            ckpt_path,
+            {
+                "format": CHECKPOINT_FORMAT,
+                "version": CHECKPOINT_VERSION,
+                "method": cfg.method,
+                "task": dataset.task,
+                "train_config": asdict(cfg),
+                "model_config": model_config,
+                "model": model.state_dict(),
+                "optimizer": optimizer.state_dict(),
+                "schedule": schedule.state_dict(),
+                "state_mean": torch.as_tensor(mean),
+                "state_std": torch.as_tensor(std),
+                "rng": {
+                    "numpy": rng.bit_generator.state,
+                    "torch": torch.get_rng_state(),
+                    "cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None,
+                },
+                "step": step,
+                "total_steps": total,
+                "complete": complete,
+                "history": history,
+                "log_window": [window_loss, window_steps],
+                "dataset": dataset.summary(),
+                "created": utc_now(),
+                "versions": package_versions(),
+            },
+        )
         last_save = time.perf_counter()
 
     end = total if stop_after is None else min(total, step + stop_after)
     board = _tensorboard(out_dir)
-    bar = progress_bar(total=total, initial=step, desc=f"train {cfg.method} on {dataset.task}",
-                       progress=progress, leave=False)  # fmt: skip
+    bar = progress_bar(
+        total=total,
+        initial=step,
+        desc=f"train {cfg.method} on {dataset.task}",
+        progress=progress,
+        leave=False,
+    )
     model.train()
     started = last_save = time.perf_counter()
     try:
@@ -342,10 +375,14 @@ def train(
             window_steps += 1
             bar.update(1)
             if step % cfg.log_every == 0 or step == total:
-                history.append({
-                    "step": step, "loss": window_loss / window_steps,
-                    "lr": schedule.get_last_lr()[0], "seconds": time.perf_counter() - started,
-                })  # fmt: skip
+                history.append(
+                    {
+                        "step": step,
+                        "loss": window_loss / window_steps,
+                        "lr": schedule.get_last_lr()[0],
+                        "seconds": time.perf_counter() - started,
+                    }
+                )
                 bar.set_postfix(loss=f"{history[-1]['loss']:.4f}")
                 if board is not None:
                     board.add_scalar("train/loss", history[-1]["loss"], step)
@@ -362,8 +399,14 @@ def train(
         if board is not None:
             board.close()
     save(complete=step >= total)
-    return TrainResult(ckpt_path, log_path, step, time.perf_counter() - started,
-                       history[-1]["loss"] if history else float("nan"), history)  # fmt: skip
+    return TrainResult(
+        ckpt_path,
+        log_path,
+        step,
+        time.perf_counter() - started,
+        history[-1]["loss"] if history else float("nan"),
+        history,
+    )
 
 
 def _tensorboard(out_dir: Path):

@@ -118,9 +118,19 @@ def test_console_entry_point_no_traceback():
 def test_module_entry_point_with_parallel_envs():
     """`python -m gcdt` with spawned env workers runs once and prints one JSON last line."""
     proc = _run_module(
-        "evaluate", "--policy", "random", "--task", "push", "--reward", "sparse",
-        "--timesteps", "200", "--envs", "2", "--json",
-    )  # fmt: skip
+        "evaluate",
+        "--policy",
+        "random",
+        "--task",
+        "push",
+        "--reward",
+        "sparse",
+        "--timesteps",
+        "200",
+        "--envs",
+        "2",
+        "--json",
+    )
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
     assert summary["timesteps"] == 200 and summary["n_envs"] == 2
@@ -148,8 +158,22 @@ def test_dataset_commands_end_to_end(tmp_path, capsys, monkeypatch):
     common = ["--task", "reach", "--no-progress", "--seed", "1"]
     argv = ["collect", "--policy", "scripted", "--transitions", "60", "--out", str(expert)]
     assert main([*argv, *common]) == 0
-    assert main(["collect", "--policy", "random", "--transitions", "200", "--out", str(rand),
-                 *common, "--json"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "collect",
+                "--policy",
+                "random",
+                "--transitions",
+                "200",
+                "--out",
+                str(rand),
+                *common,
+                "--json",
+            ]
+        )
+        == 0
+    )
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert summary["transitions"] >= 200 and summary["policy"] == "random"
 
@@ -159,8 +183,25 @@ def test_dataset_commands_end_to_end(tmp_path, capsys, monkeypatch):
     assert info["metadata"]["command"] == "gcdt " + " ".join([*argv, *common])
 
     mixed = tmp_path / "mix.npz"
-    assert main(["dataset", "mix", "--expert", str(expert), "--random", str(rand),
-                 "--ratio", "0.25", "--size", "120", "--out", str(mixed)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "dataset",
+                "mix",
+                "--expert",
+                str(expert),
+                "--random",
+                str(rand),
+                "--ratio",
+                "0.25",
+                "--size",
+                "120",
+                "--out",
+                str(mixed),
+            ]
+        )
+        == 0
+    )
     assert (
         main(["dataset", "subset", str(rand), "--size", "100", "--out", str(tmp_path / "s.npz")])
         == 0
@@ -194,29 +235,89 @@ def data_files(tmp_path, make_dataset):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["collect", "--policy", "random", "--task", "reach", "--transitions", "0",
-          "--out", "{d}/new.npz"], "argument --transitions: expected a positive integer, got 0"),
-        (["collect", "--policy", "random", "--task", "reach", "--transitions", "5",
-          "--out", "{d}/new.h5"], "dataset paths end in .npz"),
+        (
+            [
+                "collect",
+                "--policy",
+                "random",
+                "--task",
+                "reach",
+                "--transitions",
+                "0",
+                "--out",
+                "{d}/new.npz",
+            ],
+            "argument --transitions: expected a positive integer, got 0",
+        ),
+        (
+            [
+                "collect",
+                "--policy",
+                "random",
+                "--task",
+                "reach",
+                "--transitions",
+                "5",
+                "--out",
+                "{d}/new.h5",
+            ],
+            "dataset paths end in .npz",
+        ),
         (["dataset", "info", "{d}/absent.npz"], "does not exist"),
         (["dataset", "info", "{d}/corrupt.npz"], "truncated or corrupt"),
         (["dataset", "info", "{d}/data.pkl"], "truncated or corrupt"),
-        (["dataset", "mix", "--expert", "{d}/push.npz", "--random", "{d}/push.npz",
-          "--ratio", "1.5", "--size", "10", "--out", "{d}/new.npz"],
-         "argument --ratio: expected a number in [0, 1], got 1.5"),
-        (["dataset", "mix", "--expert", "{d}/push.npz", "--random", "{d}/reach.npz",
-          "--ratio", "0.5", "--size", "10", "--out", "{d}/new.npz"],
-         "cannot mix datasets of tasks 'push' and 'reach'"),
-        (["dataset", "subset", "{d}/push.npz", "--size", "31", "--out", "{d}/new.npz"],
-         "the subset needs 31 transitions but the dataset has only 30"),
-        (["dataset", "import-authors", "{d}/data.pkl", "--out", "{d}/new.npz"],
-         "refusing to unpickle"),
-        (["dataset", "import-authors", "{d}/data.pkl", "--out", "{d}/new.npz", "--trust-pickle"],
-         "must hold a non-empty list of episode dicts"),
-        (["dataset", "import-minari", "absent/x-v0", "--out", "{d}/new.npz"],
-         "no local Minari dataset 'absent/x-v0'"),
+        (
+            [
+                "dataset",
+                "mix",
+                "--expert",
+                "{d}/push.npz",
+                "--random",
+                "{d}/push.npz",
+                "--ratio",
+                "1.5",
+                "--size",
+                "10",
+                "--out",
+                "{d}/new.npz",
+            ],
+            "argument --ratio: expected a number in [0, 1], got 1.5",
+        ),
+        (
+            [
+                "dataset",
+                "mix",
+                "--expert",
+                "{d}/push.npz",
+                "--random",
+                "{d}/reach.npz",
+                "--ratio",
+                "0.5",
+                "--size",
+                "10",
+                "--out",
+                "{d}/new.npz",
+            ],
+            "cannot mix datasets of tasks 'push' and 'reach'",
+        ),
+        (
+            ["dataset", "subset", "{d}/push.npz", "--size", "31", "--out", "{d}/new.npz"],
+            "the subset needs 31 transitions but the dataset has only 30",
+        ),
+        (
+            ["dataset", "import-authors", "{d}/data.pkl", "--out", "{d}/new.npz"],
+            "refusing to unpickle",
+        ),
+        (
+            ["dataset", "import-authors", "{d}/data.pkl", "--out", "{d}/new.npz", "--trust-pickle"],
+            "must hold a non-empty list of episode dicts",
+        ),
+        (
+            ["dataset", "import-minari", "absent/x-v0", "--out", "{d}/new.npz"],
+            "no local Minari dataset 'absent/x-v0'",
+        ),
     ],
-)  # fmt: skip
+)
 def test_bad_dataset_input_exit_2_nothing_written(
     assert_usage_error, data_files, monkeypatch, argv, message
 ):
@@ -229,17 +330,38 @@ def test_bad_dataset_input_exit_2_nothing_written(
 # --- outputs that cannot be written, files that are not datasets ---------------------------
 
 UNWRITABLE = [
-    ["collect", "--policy", "scripted", "--task", "reach", "--transitions", "100000",
-     "--out", "{out}.npz"],
-    ["dataset", "mix", "--expert", "{d}/x.npz", "--random", "{d}/x.npz", "--ratio", "0.5",
-     "--size", "10", "--out", "{out}.npz"],
+    [
+        "collect",
+        "--policy",
+        "scripted",
+        "--task",
+        "reach",
+        "--transitions",
+        "100000",
+        "--out",
+        "{out}.npz",
+    ],
+    [
+        "dataset",
+        "mix",
+        "--expert",
+        "{d}/x.npz",
+        "--random",
+        "{d}/x.npz",
+        "--ratio",
+        "0.5",
+        "--size",
+        "10",
+        "--out",
+        "{out}.npz",
+    ],
     ["dataset", "subset", "{d}/x.npz", "--size", "10", "--out", "{out}.npz"],
     ["dataset", "import-minari", "tests/x-v0", "--out", "{out}.npz"],
     ["dataset", "import-authors", "{d}/x.pkl", "--out", "{out}.npz"],
     ["evaluate", *RANDOM_REACH, "--episodes", "1", "--out", "{out}.json"],
     ["train", "--dataset", "{d}/x.npz", "--out", "{out}"],
     ["tqc", "train", "--task", "reach", "--reward", "sparse", "--out", "{out}"],
-]  # fmt: skip
+]
 
 
 @pytest.fixture
@@ -304,8 +426,9 @@ def test_out_of_the_wrong_kind_fails_before_any_work(
     assert _tree(tmp_path) == before
 
 
-@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0,
-                    reason="root bypasses file permissions")  # fmt: skip
+@pytest.mark.skipif(
+    hasattr(os, "geteuid") and os.geteuid() == 0, reason="root bypasses file permissions"
+)
 def test_collect_into_read_only_folder_fails_before_any_work(assert_usage_error, no_work, tmp_path):
     locked = tmp_path / "locked"
     locked.mkdir()
@@ -330,12 +453,16 @@ def _object_array_npz(path):
         (lambda p: p.write_bytes(np.random.default_rng(0).bytes(4096)), "not a zip archive"),
         (lambda p: p.write_bytes(b""), "the file is empty"),
         (lambda p: p.write_bytes(p.with_name("good.npz").read_bytes()[:3000]), "truncated"),
-        (lambda p: np.save(p.with_suffix(".npy"), np.zeros(3)) or p.with_suffix(".npy").rename(p),
-         "not a zip archive"),
+        (
+            lambda p: (
+                np.save(p.with_suffix(".npy"), np.zeros(3)) or p.with_suffix(".npy").rename(p)
+            ),
+            "not a zip archive",
+        ),
         (_object_array_npz, "an entry holds Python objects"),
     ],
     ids=["random-bytes", "empty", "truncated", "npy", "object-array"],
-)  # fmt: skip
+)
 def test_dataset_info_on_a_non_dataset_never_suggests_unpickling(
     make_dataset, tmp_path, capsys, make, reason
 ):

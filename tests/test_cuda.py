@@ -86,8 +86,9 @@ def test_resumed_gpu_run_equals_uninterrupted(make_dataset, tmp_path):
 
 def test_policy_acts_on_the_gpu_as_on_the_cpu(make_dataset, tmp_path):
     ds = make_dataset("push", lengths=(20, 30, 25))
-    ckpt = train(ds, TrainConfig(steps=20, context=5, device="cpu", **FAST), tmp_path,
-                 progress=False).checkpoint  # fmt: skip
+    ckpt = train(
+        ds, TrainConfig(steps=20, context=5, device="cpu", **FAST), tmp_path, progress=False
+    ).checkpoint
     policies = [TrainedPolicy(ckpt, "push", device=d) for d in ("cpu", "cuda")]
     assert policies[1].device.type == "cuda" and TrainedPolicy(ckpt).device.type == "cuda"
     rng = np.random.default_rng(0)

@@ -67,8 +67,11 @@ def test_paper_profile_is_the_paper_and_others_list_their_deviations():
 
 
 def test_expert_noise_reaches_the_scripted_collections_only():
-    mixture = next(e.spec.data for e in build_grid(get_profile("quick"), only="rq5")
-                   if e.spec.data.expert_ratio == 0.5)  # fmt: skip
+    mixture = next(
+        e.spec.data
+        for e in build_grid(get_profile("quick"), only="rq5")
+        if e.spec.data.expert_ratio == 0.5
+    )
     assert mixture.expert_noise == mixture.base("expert").expert_noise == 0.2
     assert mixture.base("random").expert_noise == 0.0  # random actions take no expert noise
     assert dataclasses.replace(mixture, expert_noise=0.0).key() != mixture.key()
@@ -152,12 +155,13 @@ def test_local_sweep_runs_every_run_once(local_sweep):
 def test_ray_backend_writes_the_same_results(local_sweep, tmp_path, monkeypatch):
     pytest.importorskip("ray")
     monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))  # trains from scratch
-    summary = sweep(TINY, backend="ray", store_root=tmp_path / "runs", workers=2,
-                    progress=False)  # fmt: skip
+    summary = sweep(TINY, backend="ray", store_root=tmp_path / "runs", workers=2, progress=False)
     assert summary.ok and len(summary.done) == 7
     assert _results(tmp_path / "runs") == _results(local_sweep[0] / "runs")
-    backends = {json.loads(p.read_text())["execution"]["backend"]
-                for p in (tmp_path / "runs").glob("*.json")}  # fmt: skip
+    backends = {
+        json.loads(p.read_text())["execution"]["backend"]
+        for p in (tmp_path / "runs").glob("*.json")
+    }
     assert backends == {"ray"}
 
 
@@ -204,8 +208,9 @@ def test_killed_sweep_resumes_with_only_the_missing_runs(tmp_path):
     runs = tmp_path / "runs"
     env = {**os.environ, "GCDT_ARTIFACTS": str(tmp_path / "artifacts")}
     repo = Path(__file__).resolve().parent.parent
-    driver = subprocess.Popen([sys.executable, "-c", DRIVER, str(runs)], cwd=repo, env=env,
-                              start_new_session=True)  # fmt: skip
+    driver = subprocess.Popen(
+        [sys.executable, "-c", DRIVER, str(runs)], cwd=repo, env=env, start_new_session=True
+    )
     deadline = time.monotonic() + 300
     while not list(runs.glob("*.json")) and time.monotonic() < deadline:
         time.sleep(0.2)
@@ -215,8 +220,14 @@ def test_killed_sweep_resumes_with_only_the_missing_runs(tmp_path):
     assert 1 <= len(first) < 7
     for name in first:  # whatever was written is whole
         assert RunStore(runs).read(Path(name).stem).state == "done"
-    done = subprocess.run([sys.executable, "-c", DRIVER, str(runs)], cwd=repo, env=env,
-                          capture_output=True, text=True, timeout=600)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", DRIVER, str(runs)],
+        cwd=repo,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert done.returncode == 0, done.stderr
     assert f"{7 - len(first)} done, {len(first)} skipped, 0 failed" in done.stdout
     assert {p.name: p.stat().st_mtime_ns for p in runs.glob("*.json") if p.name in first} == first
@@ -230,10 +241,12 @@ def test_killed_sweep_resumes_with_only_the_missing_runs(tmp_path):
         (["--profile", "smoke", "--backend", "slurm"], "invalid choice: 'slurm'"),
         (["--profile", "smoke", "--only", "rq9"], "invalid choice: 'rq9'"),
         (["--profile", "smoke", "--address", "1.2.3.4:6379"], "--address applies only to"),
-        (["--profile", "smoke", "--backend", "ray", "--address", "nonsense"],
-         "Ray address 'nonsense' is not HOST:PORT"),
+        (
+            ["--profile", "smoke", "--backend", "ray", "--address", "nonsense"],
+            "Ray address 'nonsense' is not HOST:PORT",
+        ),
     ],
-)  # fmt: skip
+)
 def test_bad_sweep_input_exit_2(assert_usage_error, argv, message):
     assert_usage_error(["sweep", *argv], message)
 
@@ -258,8 +271,10 @@ def test_dry_run_lists_runs_with_state_and_cost(capsys):
     assert len(lines) == len(sizes) + 1 and lines[-1].startswith(f"{len(sizes)} runs, ")
     assert all("gcdt push/sparse seed 0" in line and " min " in line for line in lines[:-1])
     costs = CostModel()
-    short, long = (dataclasses.replace(build_grid(TINY, only="table1")[0].spec, train_steps=n)
-                   for n in (10, 1000))  # fmt: skip
+    short, long = (
+        dataclasses.replace(build_grid(TINY, only="table1")[0].spec, train_steps=n)
+        for n in (10, 1000)
+    )
     assert costs.estimate(long) - costs.estimate(short) == pytest.approx(
         990 * costs.rates["dt_step"]
     )

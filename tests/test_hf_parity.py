@@ -55,9 +55,16 @@ def _copy_hf_weights(hf, ours: GoalConditionedDT) -> None:
 def test_same_actions_as_huggingface():
     torch.manual_seed(0)
     hf_config = transformers.DecisionTransformerConfig(
-        state_dim=25, act_dim=4, hidden_size=128, n_layer=3, n_head=1, n_inner=None,
-        activation_function="relu", max_ep_len=1000, action_tanh=True,
-    )  # fmt: skip
+        state_dim=25,
+        act_dim=4,
+        hidden_size=128,
+        n_layer=3,
+        n_head=1,
+        n_inner=None,
+        activation_function="relu",
+        max_ep_len=1000,
+        action_tanh=True,
+    )
     hf = transformers.DecisionTransformerModel(hf_config).eval()
     with torch.no_grad():  # non-trivial values everywhere, including wpe and the LN biases
         for p in hf.parameters():
@@ -72,8 +79,12 @@ def test_same_actions_as_huggingface():
     mask[1, :7] = False  # left padding in one sequence
     with torch.no_grad():
         _, expected, _ = hf(
-            states=states, actions=actions, returns_to_go=rtg, timesteps=timesteps,
-            attention_mask=mask.long(), return_dict=False,
-        )  # fmt: skip
+            states=states,
+            actions=actions,
+            returns_to_go=rtg,
+            timesteps=timesteps,
+            attention_mask=mask.long(),
+            return_dict=False,
+        )
         got = ours(states, actions, rtg, timesteps, mask)
     torch.testing.assert_close(got[mask], expected[mask], rtol=1e-5, atol=1e-5)

@@ -33,3 +33,38 @@ def test_wrong_parameter_types_get_a_clear_message():
     with pytest.raises(GcdtError, match="parameter backend must be one of local, ray"):
         check_parameters("smoke", ["local"])
     assert check_parameters("smoke", "local").name == "smoke"
+
+
+def test_the_gcdt_papermill_engine_runs_a_notebook_without_the_tcp_warning(tmp_path):
+    """`make reproduce` executes notebooks with `papermill --engine gcdt`: the kernel's
+    transport is encrypted, so ipykernel's plain-TCP warning no longer appears on each one."""
+    import subprocess
+    import sys
+
+    import nbformat
+
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("print(6 * 7)")])
+    nb.metadata["kernelspec"] = {
+        "name": "python3",
+        "display_name": "Python 3",
+        "language": "python",
+    }
+    nbformat.write(nb, tmp_path / "in.ipynb")
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "papermill",
+            "--engine",
+            "gcdt",
+            "--no-progress-bar",
+            str(tmp_path / "in.ipynb"),
+            str(tmp_path / "out.ipynb"),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert "without encryption" not in done.stderr
+    out = nbformat.read(tmp_path / "out.ipynb", as_version=4)
+    assert out.cells[0].outputs[0]["text"] == "42\n"

@@ -17,8 +17,16 @@ from gcdt.experiments.profiles import SMOKE, Scope
 from gcdt.report import figures, tables
 
 ALL = Scope(tasks=("reach", "push"), rewards=("sparse",))
-PROFILE = dataclasses.replace(SMOKE, name="report-test", seeds=(0, 1, 2), table1=ALL,
-                              table1_tqc=ALL, rq4=ALL, rq5=ALL, ablation=ALL)  # fmt: skip
+PROFILE = dataclasses.replace(
+    SMOKE,
+    name="report-test",
+    seeds=(0, 1, 2),
+    table1=ALL,
+    table1_tqc=ALL,
+    rq4=ALL,
+    rq5=ALL,
+    ablation=ALL,
+)
 
 
 def _success(spec) -> float:
@@ -32,11 +40,20 @@ def _write_runs(root) -> RunStore:
     store = RunStore(root)
     for entry in build_grid(PROFILE):
         spec = entry.spec
-        store.write(spec.key(), {
-            "key": spec.key(), "schema": RUN_SCHEMA, "status": "done", "spec": spec.to_dict(),
-            "metrics": {"success_rate": _success(spec), "mean_return": -10 * spec.seed,
-                        "episodes": 20},
-        })  # fmt: skip
+        store.write(
+            spec.key(),
+            {
+                "key": spec.key(),
+                "schema": RUN_SCHEMA,
+                "status": "done",
+                "spec": spec.to_dict(),
+                "metrics": {
+                    "success_rate": _success(spec),
+                    "mean_return": -10 * spec.seed,
+                    "episodes": 20,
+                },
+            },
+        )
     return store
 
 
@@ -65,8 +82,9 @@ def test_table1_aggregates_over_seeds_beside_the_paper(runs):
 def test_ablation_table_compares_goal_conditionings(runs):
     table = tables.ablation_table(runs)
     assert set(table["method"]) == {"gcdt", "dt-desired", "dt"}
-    gcdt, dt = (table[(table["method"] == m) & (table["task"] == "push")].iloc[0]
-                for m in ("gcdt", "dt"))  # fmt: skip
+    gcdt, dt = (
+        table[(table["method"] == m) & (table["task"] == "push")].iloc[0] for m in ("gcdt", "dt")
+    )
     assert gcdt["success_mean"] - dt["success_mean"] == pytest.approx(20.0)
 
 

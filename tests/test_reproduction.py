@@ -147,21 +147,36 @@ def test_notebooks_and_report_render_from_results_with_the_artifacts_deleted(tmp
         shutil.rmtree(artifacts)
         for notebook in sorted((REPO_ROOT / "notebooks").glob("0[1-6]_*.ipynb")):
             papermill.execute_notebook(
-                str(notebook), str(tmp_path / notebook.name), parameters={"profile": "smoke"},
-                cwd=str(REPO_ROOT / "notebooks"), progress_bar=False, kernel_name="python3",
-            )  # fmt: skip
-        subprocess.run([sys.executable, "-m", "gcdt", "report", "--profile", "smoke"],
-                       check=True, capture_output=True)  # fmt: skip
+                str(notebook),
+                str(tmp_path / notebook.name),
+                parameters={"profile": "smoke"},
+                cwd=str(REPO_ROOT / "notebooks"),
+                progress_bar=False,
+                kernel_name="python3",
+            )
+        subprocess.run(
+            [sys.executable, "-m", "gcdt", "report", "--profile", "smoke"],
+            check=True,
+            capture_output=True,
+        )
         assert not artifacts.exists(), sorted(artifacts.rglob("*"))
-        for name in ("fig2_architecture", "tqc_learning_curves", "training_loss",
-                     "fig3_dataset_size", "fig4_expert_ratio"):  # fmt: skip
+        for name in (
+            "fig2_architecture",
+            "tqc_learning_curves",
+            "training_loss",
+            "fig3_dataset_size",
+            "fig4_expert_ratio",
+        ):
             assert (figures_dir("smoke", outputs) / f"{name}.png").stat().st_size > 0
         assert (results_dir("smoke", outputs) / "table1.csv").exists()
         papermill.execute_notebook(
-            str(REPO_ROOT / "notebooks" / "07_explorer.ipynb"), str(tmp_path / "07.ipynb"),
-            parameters={"profile": "smoke"}, cwd=str(REPO_ROOT / "notebooks"),
-            progress_bar=False, kernel_name="python3",
-        )  # fmt: skip
+            str(REPO_ROOT / "notebooks" / "07_explorer.ipynb"),
+            str(tmp_path / "07.ipynb"),
+            parameters={"profile": "smoke"},
+            cwd=str(REPO_ROOT / "notebooks"),
+            progress_bar=False,
+            kernel_name="python3",
+        )
         assert list((artifacts / "grid" / "checkpoints").glob("*/checkpoint.pt"))
     finally:
         for k, v in old.items():

@@ -117,8 +117,18 @@ def test_zip_is_a_policy_acting_like_sb3s_own_loader(push_run):
 
 def test_collect_with_a_tqc_expert(push_run, tmp_path, capsys):
     out = tmp_path / "tqc_push.npz"
-    argv = ["collect", "--policy", f"tqc:{push_run.model}", "--task", "push",
-            "--transitions", "120", "--out", str(out), "--no-progress"]  # fmt: skip
+    argv = [
+        "collect",
+        "--policy",
+        f"tqc:{push_run.model}",
+        "--task",
+        "push",
+        "--transitions",
+        "120",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     assert main(argv) == 0
     dataset = load_dataset(out)
     assert dataset.task == "push" and dataset.summary()["transitions"] >= 120
@@ -202,7 +212,15 @@ def test_training_is_reproducible(tmp_path):
     )
     weights = []
     for run in ("a", "b"):
-        result = train_tqc("reach", "dense", cfg, tmp_path / run, seed=3, eval_every=150,
-                           eval_episodes=1, progress=False)  # fmt: skip
+        result = train_tqc(
+            "reach",
+            "dense",
+            cfg,
+            tmp_path / run,
+            seed=3,
+            eval_every=150,
+            eval_episodes=1,
+            progress=False,
+        )
         weights.append(make_policy(f"tqc:{result.model}", "reach").sb3_policy.state_dict())
     assert all(np.array_equal(weights[0][k], weights[1][k]) for k in weights[0])

@@ -78,12 +78,34 @@ def test_killed_cli_run_resumes_to_the_uninterrupted_weights(make_dataset, tmp_p
     procs = []
 
     def gcdt_train(out, *extra):
-        argv = ["train", "--dataset", str(data), "--out", str(tmp_path / out), "--steps",
-                str(steps), "--context", "2", "--batch-size", "4", "--device", "cpu",
-                "--checkpoint-seconds", "0.2", "--no-progress", *extra]  # fmt: skip
-        procs.append(subprocess.Popen([sys.executable, "-m", "gcdt", *argv], env=env,
-                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                      text=True))  # fmt: skip
+        argv = [
+            "train",
+            "--dataset",
+            str(data),
+            "--out",
+            str(tmp_path / out),
+            "--steps",
+            str(steps),
+            "--context",
+            "2",
+            "--batch-size",
+            "4",
+            "--device",
+            "cpu",
+            "--checkpoint-seconds",
+            "0.2",
+            "--no-progress",
+            *extra,
+        ]
+        procs.append(
+            subprocess.Popen(
+                [sys.executable, "-m", "gcdt", *argv],
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+        )
         return procs[-1]
 
     full, killed = gcdt_train("full"), gcdt_train("split")
@@ -118,8 +140,9 @@ def test_killed_cli_run_resumes_to_the_uninterrupted_weights(make_dataset, tmp_p
 def test_resume_ignores_the_checkpoint_schedule(make_dataset, tmp_path):
     ds = make_dataset("reach", lengths=(10, 10))
     train(ds, TrainConfig(method="bc", steps=20, **FAST), tmp_path, stop_after=5, progress=False)
-    other = TrainConfig(method="bc", steps=20, log_every=10, checkpoint_every=7,
-                        checkpoint_seconds=0.5)  # fmt: skip
+    other = TrainConfig(
+        method="bc", steps=20, log_every=10, checkpoint_every=7, checkpoint_seconds=0.5
+    )
     assert train(ds, other, tmp_path, resume=True, progress=False).steps == 20
     with pytest.raises(GcdtError, match="checkpoint_seconds must be > 0, got 0"):
         TrainConfig(checkpoint_seconds=0)
@@ -197,8 +220,18 @@ def test_checkpoint_policy_matches_model_and_cli(reach_expert_data, tmp_path, ca
     """A checkpoint alone rebuilds the policy: the CLI trains one and evaluates it."""
     data_path = reach_expert_data.save(tmp_path / "reach.npz")
     out = tmp_path / "run"
-    argv = ["train", "--dataset", str(data_path), "--out", str(out), "--steps", "20",
-            "--context", "5", "--no-progress"]  # fmt: skip
+    argv = [
+        "train",
+        "--dataset",
+        str(data_path),
+        "--out",
+        str(out),
+        "--steps",
+        "20",
+        "--context",
+        "5",
+        "--no-progress",
+    ]
     assert main(argv) == 0
     ckpt = load_checkpoint(out / "checkpoint.pt")
     assert ckpt["train_config"]["goal_conditioning"] == "desired+achieved"
@@ -211,8 +244,11 @@ def test_checkpoint_policy_matches_model_and_cli(reach_expert_data, tmp_path, ca
     # Batched rollouts equal one-env rollouts: the per-env context is really per env.
     policy = TrainedPolicy(out / "checkpoint.pt")
     one = evaluate(policy, "reach", "sparse", episodes=4, n_envs=1, seed=3, progress=False)
-    obs = {"observation": np.zeros((2, 6), np.float32), "desired_goal": np.ones((2, 3), np.float32),
-           "achieved_goal": np.zeros((2, 3), np.float32)}  # fmt: skip
+    obs = {
+        "observation": np.zeros((2, 6), np.float32),
+        "desired_goal": np.ones((2, 3), np.float32),
+        "achieved_goal": np.zeros((2, 3), np.float32),
+    }
     policy.reset(2, 0)
     first = policy.predict(obs, np.array([True, True]), np.zeros(2))
     np.testing.assert_allclose(first[0], first[1], rtol=0, atol=1e-6)
@@ -222,8 +258,12 @@ def test_checkpoint_policy_matches_model_and_cli(reach_expert_data, tmp_path, ca
 def test_policy_predicts_what_the_full_model_predicts(make_dataset, tmp_path):
     """Acting computes only the newest state token and skips padding common to all envs;
     the actions must equal the full model's on the same context, envs out of step too."""
-    result = train(make_dataset("reach", (12, 9, 12)), TrainConfig(steps=3, context=5, **FAST),
-                   tmp_path, progress=False)  # fmt: skip
+    result = train(
+        make_dataset("reach", (12, 9, 12)),
+        TrainConfig(steps=3, context=5, **FAST),
+        tmp_path,
+        progress=False,
+    )
     policy = TrainedPolicy(result.checkpoint)
     policy.reset(2, 0)
     rng = np.random.default_rng(0)
@@ -240,8 +280,19 @@ def test_policy_predicts_what_the_full_model_predicts(make_dataset, tmp_path):
 
 def test_cli_train_refuses_other_task(make_dataset, tmp_path, capsys):
     path = make_dataset("push").save(tmp_path / "push.npz")
-    code = main(["train", "--dataset", str(path), "--task", "reach", "--out", str(tmp_path / "o"),
-                 "--steps", "2"])  # fmt: skip
+    code = main(
+        [
+            "train",
+            "--dataset",
+            str(path),
+            "--task",
+            "reach",
+            "--out",
+            str(tmp_path / "o"),
+            "--steps",
+            "2",
+        ]
+    )
     assert code == 2
     assert "holds 'push' data, not 'reach'" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()

@@ -60,8 +60,16 @@ def tqc_agent(spec: TQCSpec) -> Path:
             if spec.steps is not None:
                 changes["steps"] = spec.steps
             cfg = cfg.with_budget(**changes)
-            train_tqc(spec.task, spec.reward, cfg, out, seed=spec.seed, eval_every=spec.eval_every,
-                      eval_episodes=spec.eval_episodes, progress=False)  # fmt: skip
+            train_tqc(
+                spec.task,
+                spec.reward,
+                cfg,
+                out,
+                seed=spec.seed,
+                eval_every=spec.eval_every,
+                eval_episodes=spec.eval_episodes,
+                progress=False,
+            )
     return model
 
 
@@ -78,8 +86,13 @@ def dataset(spec: DataSpec) -> Dataset:
             if spec.expert_ratio == 1.0:
                 made = subset(expert, spec.size, seed=spec.seed)
             else:
-                made = mix(expert, dataset(spec.base("random")), spec.expert_ratio, spec.size,
-                           seed=spec.seed)  # fmt: skip
+                made = mix(
+                    expert,
+                    dataset(spec.base("random")),
+                    spec.expert_ratio,
+                    spec.size,
+                    seed=spec.seed,
+                )
         made = made.with_metadata(grid_spec=spec.key())
         made.save(path)
     return made
@@ -97,8 +110,15 @@ def collecting_policy(spec: DataSpec) -> tuple[Policy, str]:
 
 def _collect(spec: DataSpec) -> Dataset:
     policy, reward = collecting_policy(spec)
-    return collect(policy, spec.task, spec.base_size, seed=spec.seed, n_envs=spec.collect_envs,
-                   reward=reward, progress=False)  # fmt: skip
+    return collect(
+        policy,
+        spec.task,
+        spec.base_size,
+        seed=spec.seed,
+        n_envs=spec.collect_envs,
+        reward=reward,
+        progress=False,
+    )
 
 
 def tqc_curve(run_dir: Path, fields: tuple[str, ...]) -> list[dict[str, float]]:

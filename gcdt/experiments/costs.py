@@ -47,8 +47,11 @@ class CostModel:
         if (bench / "tqc_her_throughput.json").exists():
             tqc = json.loads((bench / "tqc_her_throughput.json").read_text())
             for name, cell in tqc["configs"].items():
-                model._set(f"tqc_step:{name}", 1 / cell["learning_steps_per_second"],
-                           "tqc_her_throughput.json")  # fmt: skip
+                model._set(
+                    f"tqc_step:{name}",
+                    1 / cell["learning_steps_per_second"],
+                    "tqc_her_throughput.json",
+                )
         if (bench / "run_costs.json").exists():
             runs = json.loads((bench / "run_costs.json").read_text())["results"]
             for name, key, invert in (

@@ -86,9 +86,14 @@ class DataSpec:
     def base(self, kind: str) -> DataSpec:
         """The `"expert"` or `"random"` collection that this data is drawn from."""
         if kind == "random":
-            return dataclasses.replace(self, size=self.base_size, expert_ratio=0.0,
-                                       expert="random", expert_tqc=None,
-                                       expert_noise=0.0)  # fmt: skip
+            return dataclasses.replace(
+                self,
+                size=self.base_size,
+                expert_ratio=0.0,
+                expert="random",
+                expert_tqc=None,
+                expert_noise=0.0,
+            )
         return dataclasses.replace(self, size=self.base_size, expert_ratio=1.0)
 
 
@@ -125,8 +130,9 @@ class RunSpec:
         data = d["data"]
         if data is not None:
             data = DataSpec(**{**data, "expert_tqc": tqc(data["expert_tqc"])})
-        return cls(**{**d, "data": data, "tqc": tqc(d["tqc"]),
-                      "eval_seeds": tuple(d["eval_seeds"])})  # fmt: skip
+        return cls(
+            **{**d, "data": data, "tqc": tqc(d["tqc"]), "eval_seeds": tuple(d["eval_seeds"])}
+        )
 
     @property
     def label(self) -> str:
@@ -151,37 +157,75 @@ class GridEntry:
 
 
 def _budget(profile: Profile) -> tuple[tuple[str, Any], ...]:
-    return tuple(sorted((k, tuple(v) if isinstance(v, list) else v)
-                        for k, v in profile.tqc_budget.items()))  # fmt: skip
+    return tuple(
+        sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in profile.tqc_budget.items())
+    )
 
 
 def expert_tqc_spec(profile: Profile, task: str) -> TQCSpec:
     """The TQC+HER agent that collects `task`'s expert data: sparse rewards, the config's steps."""
-    return TQCSpec(task, "sparse", profile.tqc_config, None, _budget(profile), profile.data_seed,
-                   profile.tqc_eval_every, profile.tqc_eval_episodes)  # fmt: skip
+    return TQCSpec(
+        task,
+        "sparse",
+        profile.tqc_config,
+        None,
+        _budget(profile),
+        profile.data_seed,
+        profile.tqc_eval_every,
+        profile.tqc_eval_episodes,
+    )
 
 
 def data_spec(profile: Profile, task: str, size: int, expert_ratio: float) -> DataSpec:
     expert_tqc = expert_tqc_spec(profile, task) if profile.expert == "tqc" else None
-    return DataSpec(task, int(size), float(expert_ratio), profile.expert, expert_tqc,
-                    float(profile.expert_noise), profile.dataset_size, profile.data_seed,
-                    profile.collect_envs)  # fmt: skip
+    return DataSpec(
+        task,
+        int(size),
+        float(expert_ratio),
+        profile.expert,
+        expert_tqc,
+        float(profile.expert_noise),
+        profile.dataset_size,
+        profile.data_seed,
+        profile.collect_envs,
+    )
 
 
-def run_spec(profile: Profile, method: str, task: str, reward: str, seed: int,
-             data: DataSpec | None) -> RunSpec:  # fmt: skip
+def run_spec(
+    profile: Profile, method: str, task: str, reward: str, seed: int, data: DataSpec | None
+) -> RunSpec:
     tqc = None
     if method == "tqc":
         steps = profile.tqc_steps if profile.tqc_steps is not None else profile.dataset_size
-        tqc = TQCSpec(task, reward, profile.tqc_config, steps, _budget(profile), seed,
-                      profile.tqc_eval_every, profile.tqc_eval_episodes)  # fmt: skip
-    train_steps = None if method == "tqc" or profile.train_steps is None else (
-        profile.train_steps[task])  # fmt: skip
+        tqc = TQCSpec(
+            task,
+            reward,
+            profile.tqc_config,
+            steps,
+            _budget(profile),
+            seed,
+            profile.tqc_eval_every,
+            profile.tqc_eval_episodes,
+        )
+    train_steps = (
+        None if method == "tqc" or profile.train_steps is None else (profile.train_steps[task])
+    )
     learning_rate = None if method == "tqc" else profile.learning_rate
     eval_seeds = tuple(seed + 100 * i for i in range(profile.eval_seeds))
-    return RunSpec(method, task, reward, seed, data, train_steps, learning_rate, tqc,
-                   profile.eval_timesteps, eval_seeds, profile.eval_envs,
-                   profile.cpus_per_run)  # fmt: skip
+    return RunSpec(
+        method,
+        task,
+        reward,
+        seed,
+        data,
+        train_steps,
+        learning_rate,
+        tqc,
+        profile.eval_timesteps,
+        eval_seeds,
+        profile.eval_envs,
+        profile.cpus_per_run,
+    )
 
 
 def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:

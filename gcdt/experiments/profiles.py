@@ -29,7 +29,7 @@ class Scope:
 
 @dataclass(frozen=True)
 class Profile:
-    """One size of the grid (DESIGN.md section 4). Defaults are the paper's protocol."""
+    """One size of the grid (docs/experiments.md). Defaults are the paper's protocol."""
 
     name: str
     description: str
@@ -76,8 +76,9 @@ class Profile:
 
     def __post_init__(self) -> None:
         if not self.expert_noise >= 0.0:
-            raise GcdtError(f"profile {self.name!r}: expert_noise must be >= 0, got "
-                            f"{self.expert_noise!r}")  # fmt: skip
+            raise GcdtError(
+                f"profile {self.name!r}: expert_noise must be >= 0, got {self.expert_noise!r}"
+            )
         if self.expert_noise and self.expert != "scripted":
             raise GcdtError(
                 f"profile {self.name!r}: expert_noise applies to the scripted experts only; "
@@ -179,8 +180,10 @@ def deviations(profile: Profile) -> list[str]:
             f"{p.dataset_size:,} transitions of expert (and of random) data instead of "
             f"{paper.dataset_size:,}"
         )
-    for name, label, fmt in (("rq4_sizes", "RQ4 subset sizes", "{:,}"),
-                             ("rq5_ratios", "RQ5 expert ratios", "{:.0%}")):  # fmt: skip
+    for name, label, fmt in (
+        ("rq4_sizes", "RQ4 subset sizes", "{:,}"),
+        ("rq5_ratios", "RQ5 expert ratios", "{:.0%}"),
+    ):
         ours, theirs = getattr(p, name), getattr(paper, name)
         if ours != theirs:
             listed = [", ".join(fmt.format(v) for v in values) for values in (ours, theirs)]

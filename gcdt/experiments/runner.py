@@ -28,8 +28,9 @@ from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_
 TQC_CURVE_FIELDS = ("env_steps", "success_rate", "mean_return", "episodes")
 
 
-def execute_run(spec_dict: dict[str, Any], store_root: str, artifacts_root: str,
-                backend: str) -> str:  # fmt: skip
+def execute_run(
+    spec_dict: dict[str, Any], store_root: str, artifacts_root: str, backend: str
+) -> str:
     """Run `spec_dict` (a `RunSpec.to_dict()`), write its result; return "done" or "failed".
 
     `artifacts_root` is the driver's artifacts folder: workers share it, whatever their
@@ -112,10 +113,24 @@ def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict
 def _evaluate(policy: Any, spec: RunSpec, seed: int) -> dict[str, Any]:
     from gcdt.evaluation import evaluate
 
-    summary = evaluate(policy, spec.task, spec.reward, timesteps=spec.eval_timesteps,
-                       n_envs=spec.eval_envs, seed=seed, progress=False).summary  # fmt: skip
-    keep = ("seed", "episodes", "success_rate", "mean_return", "std_return", "mean_length",
-            "mean_final_distance")  # fmt: skip
+    summary = evaluate(
+        policy,
+        spec.task,
+        spec.reward,
+        timesteps=spec.eval_timesteps,
+        n_envs=spec.eval_envs,
+        seed=seed,
+        progress=False,
+    ).summary
+    keep = (
+        "seed",
+        "episodes",
+        "success_rate",
+        "mean_return",
+        "std_return",
+        "mean_length",
+        "mean_final_distance",
+    )
     return {k: summary[k] for k in keep}
 
 

@@ -47,9 +47,10 @@ class RunStore:
             return StoredRun("corrupt", None, f"{path.name} is not the result of run {key}")
         if result.get("schema") != RUN_SCHEMA:
             return StoredRun(
-                "corrupt", None, f"{path.name} has result schema {result.get('schema')!r}, "
-                f"not {RUN_SCHEMA}",
-            )  # fmt: skip
+                "corrupt",
+                None,
+                f"{path.name} has result schema {result.get('schema')!r}, not {RUN_SCHEMA}",
+            )
         state = result.get("status")
         if state not in ("done", "failed"):
             return StoredRun("corrupt", None, f"{path.name} has unknown status {state!r}")

@@ -69,9 +69,13 @@ class SweepSummary:
         )
 
 
-def plan(profile: Profile, store: RunStore, only: str | None = None,
-         costs: CostModel | None = None, methods: Sequence[str] | None = None,
-         ) -> tuple[list[PlannedRun], list[str]]:  # fmt: skip
+def plan(
+    profile: Profile,
+    store: RunStore,
+    only: str | None = None,
+    costs: CostModel | None = None,
+    methods: Sequence[str] | None = None,
+) -> tuple[list[PlannedRun], list[str]]:
     """Every run of the grid (of section `only`, of `methods`) with its stored state and
     estimated cost; warnings for files that are not trusted (corrupt results, JSON files of no
     run of this grid)."""
@@ -84,12 +88,14 @@ def plan(profile: Profile, store: RunStore, only: str | None = None,
         stored = store.read(key)
         if stored.problem:
             warnings.append(f"{stored.problem}: it will be run again")
-        planned.append(PlannedRun(entry, key, stored.state, stored.problem,
-                                  costs.estimate(entry.spec)))  # fmt: skip
+        planned.append(
+            PlannedRun(entry, key, stored.state, stored.problem, costs.estimate(entry.spec))
+        )
     if only is None and methods is None:
         keys = {p.key for p in planned}
-        warnings += [f"{p} is not a result of this grid: ignored" for p in
-                     store.foreign_files(keys)]  # fmt: skip
+        warnings += [
+            f"{p} is not a result of this grid: ignored" for p in store.foreign_files(keys)
+        ]
     return planned, warnings
 
 
@@ -103,13 +109,18 @@ def shared_cost(todo: list[PlannedRun], costs: CostModel | None = None) -> float
         data = p.entry.spec.data
         if data is None:
             continue
-        for base in (data.base("expert"), *(() if data.expert_ratio == 1 else
-                                            (data.base("random"),))):  # fmt: skip
+        for base in (
+            data.base("expert"),
+            *(() if data.expert_ratio == 1 else (data.base("random"),)),
+        ):
             bases[base.key()] = base
             if base.expert_tqc is not None:
                 experts[base.expert_tqc.key()] = base.expert_tqc
-    seconds = sum(costs.collection(b.size) for k, b in bases.items()
-                  if not (grid_dir() / "datasets" / f"{k}.npz").exists())  # fmt: skip
+    seconds = sum(
+        costs.collection(b.size)
+        for k, b in bases.items()
+        if not (grid_dir() / "datasets" / f"{k}.npz").exists()
+    )
     for key, spec in experts.items():
         if not (grid_dir() / "tqc" / key / "run.json").exists():
             from gcdt.baselines.tqc_her import load_tqc_config
@@ -152,8 +163,9 @@ def sweep(
     started = time.perf_counter()
     if todo:
         run = _run_ray if backend == "ray" else _run_local
-        bar = progress_bar(total=len(todo), desc=f"sweep {profile.name}", unit="run",
-                           progress=progress)  # fmt: skip
+        bar = progress_bar(
+            total=len(todo), desc=f"sweep {profile.name}", unit="run", progress=progress
+        )
         try:
             for key, status in run(todo, str(store.root), workers, address, profile):
                 (summary.done if status == "done" else summary.failed).append(key)
@@ -165,15 +177,18 @@ def sweep(
     return summary
 
 
-def _run_local(todo: list[PlannedRun], root: str, workers: int, address: str | None,
-               profile: Profile):  # fmt: skip
+def _run_local(
+    todo: list[PlannedRun], root: str, workers: int, address: str | None, profile: Profile
+):
     """Yield (key, status) as local worker processes finish runs."""
     artifacts = str(artifacts_dir())
     # Spawned, not forked: workers start clean of the driver's torch threads and env state.
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = {pool.submit(execute_run, p.entry.spec.to_dict(), root, artifacts, "local"): p.key
-                   for p in todo}  # fmt: skip
+        futures = {
+            pool.submit(execute_run, p.entry.spec.to_dict(), root, artifacts, "local"): p.key
+            for p in todo
+        }
         for future in as_completed(futures):
             try:
                 yield futures[future], future.result()
@@ -198,8 +213,9 @@ def _check_address(address: str) -> None:
         ) from None
 
 
-def _run_ray(todo: list[PlannedRun], root: str, workers: int, address: str | None,
-             profile: Profile):  # fmt: skip
+def _run_ray(
+    todo: list[PlannedRun], root: str, workers: int, address: str | None, profile: Profile
+):
     """Yield (key, status) as Ray tasks finish runs."""
     artifacts = str(artifacts_dir())
     try:

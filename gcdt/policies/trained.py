@@ -129,8 +129,14 @@ class TrainedPolicy(Policy):
             raise GcdtError("only a Decision Transformer has attention to show")
         weights: list[torch.Tensor] = []
         i = slice(env, env + 1)
-        self.model(self.states[i], self.actions[i], self.rtg[i], self.timesteps[i],
-                   self.mask[i], attention=weights)  # fmt: skip
+        self.model(
+            self.states[i],
+            self.actions[i],
+            self.rtg[i],
+            self.timesteps[i],
+            self.mask[i],
+            attention=weights,
+        )
         return torch.cat(weights).cpu().numpy()
 
     def config(self) -> dict[str, Any]:

@@ -49,9 +49,12 @@ def write_tables(profile: Profile, runs) -> list[Path]:
     written = []
     for name, table, caption in (
         ("table1", tables.table1(runs), "Performance comparison: Return / Success Rate (\\%)"),
-        ("ablation", tables.ablation_table(runs), "Goal conditioning ablation: Return / "
-         "Success Rate (\\%)"),
-    ):  # fmt: skip
+        (
+            "ablation",
+            tables.ablation_table(runs),
+            "Goal conditioning ablation: Return / Success Rate (\\%)",
+        ),
+    ):
         if table.empty:
             continue
         for ext, text in (
@@ -152,8 +155,10 @@ def readme_block(profile: Profile) -> str:
     ]
     ablation = tables.ablation_table(runs)
     if not ablation.empty:
-        parts += ["**Goal-conditioning ablation** (ours; not in the paper), same data:",
-                  tables.to_markdown(ablation, paper=False)]  # fmt: skip
+        parts += [
+            "**Goal-conditioning ablation** (ours; not in the paper), same data:",
+            tables.to_markdown(ablation, paper=False),
+        ]
     for fig, caption in (
         ("fig3_dataset_size", "Fig. 3: success rate vs dataset size (RQ4)"),
         ("fig4_expert_ratio", "Fig. 4: success rate vs expert share (RQ5)"),

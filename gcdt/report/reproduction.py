@@ -35,27 +35,39 @@ def _points(runs: pd.DataFrame) -> pd.DataFrame:
 
     def add(item: str, cell: pd.Series, metrics: tuple[str, ...]) -> None:
         for metric in metrics:
-            rows.append({
-                "item": item, "metric": metric, "value": cell[f"{metric}_mean"],
-                "low": cell[f"{metric}_ci_low"], "high": cell[f"{metric}_ci_high"],
-            })  # fmt: skip
+            rows.append(
+                {
+                    "item": item,
+                    "metric": metric,
+                    "value": cell[f"{metric}_mean"],
+                    "low": cell[f"{metric}_ci_low"],
+                    "high": cell[f"{metric}_ci_high"],
+                }
+            )
 
     def where(task: str, reward: str) -> str:
         return f"{tables.TASK_NAMES[task]} {reward}"
 
     for _, c in tables.table1(runs).iterrows():
-        add(f"Table 1: {tables.METHOD_NAMES[c['method']]}, {where(c['task'], c['reward'])}", c,
-            ("success", "return"))  # fmt: skip
+        add(
+            f"Table 1: {tables.METHOD_NAMES[c['method']]}, {where(c['task'], c['reward'])}",
+            c,
+            ("success", "return"),
+        )
     ablation = tables.ablation_table(runs)
     for _, c in ablation[ablation["method"] != "gcdt"].iterrows():
-        add(f"Ablation: {tables.METHOD_NAMES[c['method']]}, {where(c['task'], c['reward'])}", c,
-            ("success", "return"))  # fmt: skip
+        add(
+            f"Ablation: {tables.METHOD_NAMES[c['method']]}, {where(c['task'], c['reward'])}",
+            c,
+            ("success", "return"),
+        )
     for section, x, label in (("rq4", "size", "Fig. 3"), ("rq5", "expert_ratio", "Fig. 4")):
-        sel = runs[runs["sections"].apply(lambda s, sec=section: sec in s)
-                   & (runs["method"] == "gcdt")]  # fmt: skip
+        sel = runs[
+            runs["sections"].apply(lambda s, sec=section: sec in s) & (runs["method"] == "gcdt")
+        ]
         if sel.empty:
             continue
-        for _, c in tables._aggregate(sel.sort_values(x), ["task", "reward", x]).iterrows():
+        for _, c in tables.aggregate(sel.sort_values(x), ["task", "reward", x]).iterrows():
             at = f"{int(c[x]):,} transitions" if x == "size" else f"{100 * c[x]:.0f} % expert"
             add(f"{label}: {where(c['task'], c['reward'])}, {at}", c, ("success",))
     return pd.DataFrame(rows, columns=["item", "metric", "value", "low", "high"])
@@ -66,8 +78,9 @@ def reproduction_check(published: pd.DataFrame, ours: pd.DataFrame) -> pd.DataFr
     published interval, for every item of the published tables and figures."""
     merged = _points(published).merge(
         _points(ours)[["item", "metric", "value"]].rename(columns={"value": "ours"}),
-        on=["item", "metric"], how="left",
-    )  # fmt: skip
+        on=["item", "metric"],
+        how="left",
+    )
     merged = merged.rename(columns={"value": "published"})
     merged["difference"] = merged["ours"] - merged["published"]
     merged["agrees"] = (merged["ours"] >= merged["low"] - TOLERANCE) & (
@@ -79,8 +92,10 @@ def reproduction_check(published: pd.DataFrame, ours: pd.DataFrame) -> pd.DataFr
 def check_markdown(check: pd.DataFrame) -> str:
     """The check as a Markdown table, then one summary line."""
     unit = {"success": " %", "return": ""}
-    lines = ["| item | metric | published [95 % interval] | ours | difference | agrees |",
-             "|---|---|---|---|---|---|"]  # fmt: skip
+    lines = [
+        "| item | metric | published [95 % interval] | ours | difference | agrees |",
+        "|---|---|---|---|---|---|",
+    ]
     for r in check.itertuples():
         ours = "missing" if np.isnan(r.ours) else f"{r.ours:.2f}{unit[r.metric]}"
         diff = "" if np.isnan(r.difference) else f"{r.difference:+.2f}"
@@ -100,8 +115,9 @@ def summary_line(check: pd.DataFrame) -> str:
     )
 
 
-def write_check(profile: Profile, ours_root: str | Path,
-                published_root: str | Path = REPO_ROOT) -> tuple[str, Path | None]:  # fmt: skip
+def write_check(
+    profile: Profile, ours_root: str | Path, published_root: str | Path = REPO_ROOT
+) -> tuple[str, Path | None]:
     """Compare the runs under `ours_root` with the published ones; write
     `results/<profile>/reproduction_check.{csv,md}` under `ours_root`; return the Markdown
     (and the .md path, None when nothing is published to compare with)."""
@@ -132,15 +148,17 @@ def write_check(profile: Profile, ours_root: str | Path,
     return text, path
 
 
-def publish(profile: Profile, source_root: str | Path,
-            published_root: str | Path = REPO_ROOT) -> list[Path]:  # fmt: skip
+def publish(
+    profile: Profile, source_root: str | Path, published_root: str | Path = REPO_ROOT
+) -> list[Path]:
     """Make the finished reproduction under `source_root` the published results of `profile`:
     results/<profile>/ and figures/<profile>/ mirror the source's (files that did not change
     are left untouched, files the source lacks are removed). Refuses an unfinished grid."""
     source = results_dir(profile.name, source_root)
     store = RunStore(source / "runs")
-    unfinished = [e.spec.label for e in build_grid(profile)
-                  if store.read(e.spec.key()).state != "done"]  # fmt: skip
+    unfinished = [
+        e.spec.label for e in build_grid(profile) if store.read(e.spec.key()).state != "done"
+    ]
     if unfinished:
         raise GcdtError(
             f"{len(unfinished)} run(s) of profile {profile.name!r} are not done in {source} "
@@ -152,8 +170,9 @@ def publish(profile: Profile, source_root: str | Path,
         (source, results_dir(profile.name, published_root)),
         (figures_dir(profile.name, source_root), figures_dir(profile.name, published_root)),
     ):
-        files = {p.relative_to(src) for p in src.rglob("*") if p.is_file()
-                 and not p.name.startswith(".")}  # fmt: skip
+        files = {
+            p.relative_to(src) for p in src.rglob("*") if p.is_file() and not p.name.startswith(".")
+        }
         if dst.exists():
             for old in dst.rglob("*"):
                 if old.is_file() and old.relative_to(dst) not in files:

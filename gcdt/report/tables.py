@@ -20,8 +20,13 @@ from gcdt.experiments.store import RunStore
 from gcdt.paths import results_dir
 
 TASK_NAMES = {"reach": "Reach", "push": "Push", "pick_and_place": "PickAndPlace"}
-METHOD_NAMES = {"gcdt": "GC-DT", "bc": "BC", "tqc": "TQC+HER", "dt": "DT (no goal)",
-                "dt-desired": "DT (desired goal)"}  # fmt: skip
+METHOD_NAMES = {
+    "gcdt": "GC-DT",
+    "bc": "BC",
+    "tqc": "TQC+HER",
+    "dt": "DT (no goal)",
+    "dt-desired": "DT (desired goal)",
+}
 #: Table 1 of the paper: (return, success %) per reward, method, task. Its "DT" is GC-DT.
 PAPER_TABLE1 = {
     (reward, method): dict(zip(("reach", "push", "pick_and_place"), cells, strict=True))
@@ -49,16 +54,23 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
             continue
         spec, result = entry.spec, stored.result
         metrics = result["metrics"]
-        rows.append({
-            "key": spec.key(), "sections": entry.sections, "method": spec.method,
-            "task": spec.task, "reward": spec.reward, "seed": spec.seed,
-            "size": spec.data.size if spec.data else None,
-            "expert_ratio": spec.data.expert_ratio if spec.data else None,
-            "success_rate": metrics["success_rate"], "mean_return": metrics["mean_return"],
-            "episodes": metrics["episodes"],
-            "std_return": _pooled_std(result.get("evaluations", [])),
-            "training": result.get("training", {}),
-        })  # fmt: skip
+        rows.append(
+            {
+                "key": spec.key(),
+                "sections": entry.sections,
+                "method": spec.method,
+                "task": spec.task,
+                "reward": spec.reward,
+                "seed": spec.seed,
+                "size": spec.data.size if spec.data else None,
+                "expert_ratio": spec.data.expert_ratio if spec.data else None,
+                "success_rate": metrics["success_rate"],
+                "mean_return": metrics["mean_return"],
+                "episodes": metrics["episodes"],
+                "std_return": _pooled_std(result.get("evaluations", [])),
+                "training": result.get("training", {}),
+            }
+        )
     if not rows:
         raise GcdtError(
             f"no finished runs of profile {profile.name!r} in {store.root}: run "
@@ -116,7 +128,8 @@ def _interval(group: pd.DataFrame, metric: str, scale: float) -> tuple[float, fl
     return low * scale, high * scale
 
 
-def _aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
+def aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
+    """Per group of `by`: mean, std and 95 % interval of return and success (%), and seeds."""
     rows = []
     for keys, group in runs.groupby(by, sort=False):
         row = dict(zip(by, keys, strict=True))
@@ -124,9 +137,12 @@ def _aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
             values = group[metric].dropna().to_numpy(dtype=np.float64) * scale
             name = "return" if metric == "mean_return" else "success"
             low, high = _interval(group, metric, scale)
-            row |= {f"{name}_mean": values.mean() if len(values) else np.nan,
-                    f"{name}_std": values.std(ddof=1) if len(values) > 1 else 0.0,
-                    f"{name}_ci_low": low, f"{name}_ci_high": high}  # fmt: skip
+            row |= {
+                f"{name}_mean": values.mean() if len(values) else np.nan,
+                f"{name}_std": values.std(ddof=1) if len(values) > 1 else 0.0,
+                f"{name}_ci_low": low,
+                f"{name}_ci_high": high,
+            }
         row["seeds"] = len(group)
         rows.append(row)
     return pd.DataFrame(rows)
@@ -137,21 +153,25 @@ def datasets_table(runs: pd.DataFrame) -> pd.DataFrame:
     run stored: episodes, mean length, success rate, mean returns), one row each."""
     rows = {
         (r.task, r.size, r.expert_ratio): {
-            "task": r.task, "size": r.size, "expert share": r.expert_ratio,
+            "task": r.task,
+            "size": r.size,
+            "expert share": r.expert_ratio,
             **{k: v for k, v in r.training["dataset"].items() if k not in ("source", "policy")},
         }
         for r in runs.itertuples()
         if r.size is not None and r.training.get("dataset")
-    }  # fmt: skip
+    }
     return pd.DataFrame([rows[k] for k in sorted(rows)])
 
 
 def table1(runs: pd.DataFrame) -> pd.DataFrame:
     """Table 1: per reward, method and task, our mean ± std (and CI) beside the paper's."""
     sel = runs[runs["sections"].apply(lambda s: "table1" in s)]
-    table = _aggregate(sel, ["reward", "method", "task"])
-    paper = [PAPER_TABLE1.get((r.reward, r.method), {}).get(r.task, (np.nan, np.nan))
-             for r in table.itertuples()]  # fmt: skip
+    table = aggregate(sel, ["reward", "method", "task"])
+    paper = [
+        PAPER_TABLE1.get((r.reward, r.method), {}).get(r.task, (np.nan, np.nan))
+        for r in table.itertuples()
+    ]
     table["paper_return"] = [p[0] for p in paper]
     table["paper_success"] = [p[1] for p in paper]
     return _ordered(table, ["dense", "sparse"], ["gcdt", "bc", "tqc"])
@@ -162,10 +182,16 @@ def ablation_table(runs: pd.DataFrame) -> pd.DataFrame:
     full = runs[runs["sections"].apply(lambda s: "ablation" in s or "table1" in s)]
     full = full[full["method"].isin(["gcdt", "dt-desired", "dt"])]
     scoped = full.merge(
-        runs[runs["sections"].apply(lambda s: "ablation" in s)][["task", "reward"]]
-        .drop_duplicates(), on=["task", "reward"])  # fmt: skip
-    return _ordered(_aggregate(scoped, ["reward", "method", "task"]), ["dense", "sparse"],
-                    ["gcdt", "dt-desired", "dt"])  # fmt: skip
+        runs[runs["sections"].apply(lambda s: "ablation" in s)][
+            ["task", "reward"]
+        ].drop_duplicates(),
+        on=["task", "reward"],
+    )
+    return _ordered(
+        aggregate(scoped, ["reward", "method", "task"]),
+        ["dense", "sparse"],
+        ["gcdt", "dt-desired", "dt"],
+    )
 
 
 def _ordered(table: pd.DataFrame, rewards: list[str], methods: list[str]) -> pd.DataFrame:
@@ -180,8 +206,10 @@ def _ordered(table: pd.DataFrame, rewards: list[str], methods: list[str]) -> pd.
 def _cell(row: pd.Series, paper: bool, pm: str = " ± ") -> str:
     """'return / success' (mean ± std over seeds; one seed has no std to show)."""
     if row["seeds"] > 1:
-        ours = (f"{row['return_mean']:.2f}{pm}{row['return_std']:.2f} / "
-                f"{row['success_mean']:.1f}{pm}{row['success_std']:.1f}")  # fmt: skip
+        ours = (
+            f"{row['return_mean']:.2f}{pm}{row['return_std']:.2f} / "
+            f"{row['success_mean']:.1f}{pm}{row['success_std']:.1f}"
+        )
     else:
         ours = f"{row['return_mean']:.2f} / {row['success_mean']:.1f}"
     if paper and not np.isnan(row.get("paper_return", np.nan)):
@@ -192,14 +220,17 @@ def _cell(row: pd.Series, paper: bool, pm: str = " ± ") -> str:
 def to_markdown(table: pd.DataFrame, paper: bool = True) -> str:
     """Rewards as blocks, methods as rows, tasks as columns: 'return / success %' cells."""
     tasks = [t for t in TASK_NAMES if t in set(table["task"])]
-    lines = ["| Method | " + " | ".join(TASK_NAMES[t] for t in tasks) + " |",
-             "|---|" + "---|" * len(tasks)]  # fmt: skip
+    lines = [
+        "| Method | " + " | ".join(TASK_NAMES[t] for t in tasks) + " |",
+        "|---|" + "---|" * len(tasks),
+    ]
     for reward, block in table.groupby("reward", sort=False):
         lines.append(f"| *{reward.capitalize()} reward* |" + " |" * len(tasks))
         for method, rows in block.groupby("method", sort=False):
             cells = {r["task"]: _cell(r, paper) for _, r in rows.iterrows()}
-            lines.append(f"| {METHOD_NAMES[method]} | "
-                         + " | ".join(cells.get(t, "–") for t in tasks) + " |")  # fmt: skip
+            lines.append(
+                f"| {METHOD_NAMES[method]} | " + " | ".join(cells.get(t, "–") for t in tasks) + " |"
+            )
     return "\n".join(lines)
 
 
@@ -207,18 +238,33 @@ def to_latex(table: pd.DataFrame, caption: str, label: str) -> str:
     """A booktabs table laid out like the paper's Table 1 (return / success %, mean ± std)."""
     tasks = [t for t in TASK_NAMES if t in set(table["task"])]
     cols = len(tasks) + 2
-    out = [r"\begin{table*}[tb]", rf"\caption{{{caption}}}", rf"\label{{{label}}}",
-           r"\centering", r"\scriptsize", r"\setlength{\tabcolsep}{3pt}",
-           r"\begin{tabular}{l" + "c" * (cols - 1) + "}", r"\toprule",
-           r"\textbf{Method} & \textbf{Metric} & "
-           + " & ".join(rf"\textbf{{{TASK_NAMES[t]}}}" for t in tasks) + r" \\"]  # fmt: skip
+    out = [
+        r"\begin{table*}[tb]",
+        rf"\caption{{{caption}}}",
+        rf"\label{{{label}}}",
+        r"\centering",
+        r"\scriptsize",
+        r"\setlength{\tabcolsep}{3pt}",
+        r"\begin{tabular}{l" + "c" * (cols - 1) + "}",
+        r"\toprule",
+        r"\textbf{Method} & \textbf{Metric} & "
+        + " & ".join(rf"\textbf{{{TASK_NAMES[t]}}}" for t in tasks)
+        + r" \\",
+    ]
     for reward, block in table.groupby("reward", sort=False):
-        out += [r"\midrule", rf"\multicolumn{{{cols}}}{{c}}{{\textit{{{reward.capitalize()} "
-                r"Reward}} \\", r"\midrule"]  # fmt: skip
+        out += [
+            r"\midrule",
+            rf"\multicolumn{{{cols}}}{{c}}{{\textit{{{reward.capitalize()} "
+            r"Reward}} \\",
+            r"\midrule",
+        ]
         for method, rows in block.groupby("method", sort=False):
             cells = {r["task"]: _cell(r, False, pm=" $\\pm$ ") for _, r in rows.iterrows()}
-            out.append(f"{METHOD_NAMES[method]} & Ret / Succ & "
-                       + " & ".join(cells.get(t, "--") for t in tasks) + r" \\")  # fmt: skip
+            out.append(
+                f"{METHOD_NAMES[method]} & Ret / Succ & "
+                + " & ".join(cells.get(t, "--") for t in tasks)
+                + r" \\"
+            )
     out += [r"\bottomrule", r"\end{tabular}", r"\end{table*}"]
     return "\n".join(out) + "\n"
 
@@ -258,15 +304,21 @@ def directions(runs: pd.DataFrame) -> pd.DataFrame:
         ours = table.loc[(reward, "gcdt", task)]
         paper = ours["paper_success"] - row["paper_success"]
         diff = ours["success_mean"] - row["success_mean"]
-        rows.append({
-            "comparison": f"GC-DT vs {METHOD_NAMES[method]}, {TASK_NAMES[task]} {reward}",
-            "paper": f"{_sign(paper)} ({paper:+.1f} pts)",
-            "ours": f"{_sign(diff)} ({diff:+.1f} pts)", "agrees": _sign(paper) == _sign(diff),
-        })  # fmt: skip
-    for section, x, low_label, high_label in (("rq4", "size", "smallest", "all"),
-                                              ("rq5", "expert_ratio", "0 %", "100 %")):  # fmt: skip
-        sel = runs[runs["sections"].apply(lambda s, sec=section: sec in s)
-                   & (runs["method"] == "gcdt")]  # fmt: skip
+        rows.append(
+            {
+                "comparison": f"GC-DT vs {METHOD_NAMES[method]}, {TASK_NAMES[task]} {reward}",
+                "paper": f"{_sign(paper)} ({paper:+.1f} pts)",
+                "ours": f"{_sign(diff)} ({diff:+.1f} pts)",
+                "agrees": _sign(paper) == _sign(diff),
+            }
+        )
+    for section, x, low_label, high_label in (
+        ("rq4", "size", "smallest", "all"),
+        ("rq5", "expert_ratio", "0 %", "100 %"),
+    ):
+        sel = runs[
+            runs["sections"].apply(lambda s, sec=section: sec in s) & (runs["method"] == "gcdt")
+        ]
         for (task, reward), cell in sel.groupby(["task", "reward"], sort=False):
             means = 100 * cell.groupby(x)["success_rate"].mean().sort_index()
             if section == "rq5" and not {0.0, 1.0} <= set(means.index):
@@ -274,19 +326,23 @@ def directions(runs: pd.DataFrame) -> pd.DataFrame:
             diff = means.iloc[0] - means.iloc[-1]
             lower, claim = _paper_trend(section, task)
             ours_lower = diff < 0
-            rows.append({
-                "comparison": f"{section.upper()}, {TASK_NAMES[task]} {reward}: {claim}",
-                "paper": "yes" if lower else "no (invariant)",
-                "ours": f"{'yes' if ours_lower else 'no'} ({low_label} {means.iloc[0]:.1f} % vs "
-                        f"{high_label} {means.iloc[-1]:.1f} %)",
-                "agrees": lower == ours_lower,
-            })  # fmt: skip
+            values = f"{low_label} {means.iloc[0]:.1f} % vs {high_label} {means.iloc[-1]:.1f} %"
+            rows.append(
+                {
+                    "comparison": f"{section.upper()}, {TASK_NAMES[task]} {reward}: {claim}",
+                    "paper": "yes" if lower else "no (invariant)",
+                    "ours": f"{'yes' if ours_lower else 'no'} ({values})",
+                    "agrees": lower == ours_lower,
+                }
+            )
     return pd.DataFrame(rows, columns=["comparison", "paper", "ours", "agrees"])
 
 
 def directions_markdown(runs: pd.DataFrame) -> str:
     table = directions(runs)
     lines = ["| comparison | paper | ours | same direction |", "|---|---|---|---|"]
-    lines += [f"| {r.comparison} | {r.paper} | {r.ours} | {'yes' if r.agrees else '**no**'} |"
-              for r in table.itertuples()]  # fmt: skip
+    lines += [
+        f"| {r.comparison} | {r.paper} | {r.ours} | {'yes' if r.agrees else '**no**'} |"
+        for r in table.itertuples()
+    ]
     return "\n".join(lines)

@@ -1,6 +1,6 @@
 """What a return-to-go near 0 means in the PickAndPlace training data: the carrying phase.
 
-    python results/quick_checks/return_phase.py DATASET.npz --out F.json
+    python scripts/quick_checks/return_phase.py DATASET.npz --out F.json
 
 For each sparse return-to-go threshold, the share of the dataset's steps at or above it where
 the fingertips are within 2 cm of the cube, beside that share over all steps; and how many
@@ -38,7 +38,10 @@ def return_phase(path: str) -> dict:
         "episodes_with_return_0": int((returns == 0).sum()),
         "near_cube_share_all_steps": float(near.mean()),
         "near_cube_share_by_return_to_go": {
-            f">= {lo}": {"steps": int((rtg >= lo).sum()), "near_cube": float(near[rtg >= lo].mean())}
+            f">= {lo}": {
+                "steps": int((rtg >= lo).sum()),
+                "near_cube": float(near[rtg >= lo].mean()),
+            }
             for lo in (0, -1, -2, -3, -5)
         },
     }

@@ -1,6 +1,6 @@
 """Run one run of the quick grid again with the current code, into folders of its own.
 
-    python results/quick_checks/rerun.py METHOD TASK REWARD --out FILE [--artifacts DIR]
+    python scripts/quick_checks/rerun.py METHOD TASK REWARD --out FILE [--artifacts DIR]
 
 Collects the run's dataset (the grid's data spec: same key, same data) if needed, trains and
 evaluates exactly as `make reproduce PROFILE=quick` does, and copies the run's result JSON
@@ -29,8 +29,11 @@ def main() -> None:
     parser.add_argument("--artifacts", default="artifacts/quick_checks/rerun")
     args = parser.parse_args()
     wanted = (args.method, args.task, args.reward)
-    specs = [e.spec for e in build_grid(get_profile("quick"), "table1")
-             if (e.spec.method, e.spec.task, e.spec.reward) == wanted]  # fmt: skip
+    specs = [
+        e.spec
+        for e in build_grid(get_profile("quick"), "table1")
+        if (e.spec.method, e.spec.task, e.spec.reward) == wanted
+    ]
     if len(specs) != 1:
         raise SystemExit(f"error: no Table 1 run {' '.join(wanted)} in the quick grid")
     spec = specs[0]

@@ -1,6 +1,6 @@
 """Why GC-DT misses on PickAndPlace with sparse rewards: where does it close the gripper?
 
-    python results/quick_checks/grasp_diagnosis.py CHECKPOINT --target-return R --episodes N --out F.json
+    python scripts/quick_checks/grasp_diagnosis.py CKPT --target-return R --episodes N --out F.json
 
 Runs whole episodes (reset seeds `episode_seed(5000, j)`) and counts, per episode, the steps
 on which the policy commands the gripper shut (action[3] < 0) while the fingertips are more
@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from gcdt.envs import episode_seed, make_env
-from gcdt.policies.trained import TrainedPolicy
 from gcdt.policies.scripted import GRASP_WIDTH, MISSED_WIDTH
+from gcdt.policies.trained import TrainedPolicy
 
 SEED = 5000
 

@@ -77,7 +77,7 @@ bench-tqc: install
 reproduce: install
 	@export GCDT_OUTPUTS="$(abspath $(REPRO_DIR))"; \
 	$(VENV)/bin/gcdt sweep --profile $(PROFILE) --backend $(BACKEND) --dry-run > /dev/null || exit 2; \
-	mkdir -p "$$GCDT_OUTPUTS/notebooks/$(PROFILE)"; \
+	mkdir -p "$$GCDT_OUTPUTS/results/$(PROFILE)/notebooks"; \
 	echo "Reproducing profile $(PROFILE) into $$GCDT_OUTPUTS"; \
 	started=$$(date +%s); \
 	$(VENV)/bin/gcdt sweep --profile $(PROFILE) --backend $(BACKEND) || exit 1; \
@@ -85,7 +85,7 @@ reproduce: install
 	  echo "== $$nb ($(PROFILE), $(BACKEND))"; \
 	  $(PY) -m papermill --engine gcdt --cwd notebooks --log-level WARNING $$([ -t 1 ] || echo --no-progress-bar) \
 	    -p profile $(PROFILE) \
-	    -p backend $(BACKEND) $$nb "$$GCDT_OUTPUTS/notebooks/$(PROFILE)/$$(basename $$nb)" || exit 1; \
+	    -p backend $(BACKEND) $$nb "$$GCDT_OUTPUTS/results/$(PROFILE)/notebooks/$$(basename $$nb)" || exit 1; \
 	done; \
 	$(VENV)/bin/gcdt report --profile $(PROFILE) --backend $(BACKEND) \
 	  --wall-seconds $$(( $$(date +%s) - started )) > /dev/null || exit 1; \

@@ -39,9 +39,10 @@ def outputs_note(profile: Profile) -> str:
     from gcdt.paths import OUTPUTS_ENV, REPO_ROOT, outputs_root
 
     where = results_dir(profile.name)
+    shown = where.relative_to(REPO_ROOT) if where.is_relative_to(REPO_ROOT) else where
     if outputs_root() == REPO_ROOT:
-        return f"Results: {where.relative_to(REPO_ROOT)}/ (the repository's published results)"
-    return f"Results: {where} (this reproduction's own folder, ${OUTPUTS_ENV})"
+        return f"Results: {shown}/ (the repository's published results)"
+    return f"Results: {shown}/ (this reproduction's own folder, ${OUTPUTS_ENV})"
 
 
 def write_tables(profile: Profile, runs) -> list[Path]:

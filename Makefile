@@ -4,7 +4,6 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.gcdt-installed
-BENCH_STAMP := $(VENV)/.gcdt-bench-installed
 PYTEST_ARGS ?=
 PROFILE ?= quick
 BACKEND ?= local
@@ -50,7 +49,7 @@ lint: install
 
 # Speed is measured here, never in unit tests. Do not run beside other heavy jobs: each
 # benchmark compares its cells side by side in one run, and the summary lands in docs/benchmarks.md.
-bench: install $(BENCH_STAMP)
+bench: install
 	$(PY) benchmarks/training_throughput.py
 	$(PY) benchmarks/evaluator_throughput.py --task push
 	for task in reach push pick_and_place; do \
@@ -60,11 +59,6 @@ bench: install $(BENCH_STAMP)
 	$(PY) benchmarks/run_costs.py
 	$(PY) benchmarks/end_to_end.py
 	$(PY) benchmarks/summary.py --docs
-
-# The benchmarks' optional extra: HuggingFace transformers, the authors' model.
-$(BENCH_STAMP): $(STAMP) environment/bench-requirements.txt
-	$(PY) -m pip install --quiet -r environment/bench-requirements.txt
-	@touch $@
 
 # TQC+HER trained on Reach (sparse and dense) to >= 95 % success: ~20 minutes on 2 cores.
 bench-tqc: install

@@ -187,10 +187,10 @@ def main() -> None:
     n, task, device = args.envs, args.task, args.device
     import torch
 
+    from gcdt.checkpoint import load_checkpoint
     from gcdt.evaluation import evaluate
     from gcdt.policies import make_policy
     from gcdt.policies.trained import TrainedPolicy
-    from gcdt.training import load_checkpoint
 
     with tempfile.TemporaryDirectory() as tmp:
         path = _checkpoint(task, Path(tmp))

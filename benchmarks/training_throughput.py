@@ -31,18 +31,12 @@ import numpy as np
 import torch
 from common import write_report
 
+from gcdt.checkpoint import build_model
 from gcdt.data import from_episodes
+from gcdt.device import resolve_device
 from gcdt.envs import compute_rewards
 from gcdt.models import BCConfig, DTConfig
-from gcdt.training import (
-    TrainConfig,
-    WindowSampler,
-    build_model,
-    keep_freed_memory,
-    make_optimizer,
-    resolve_device,
-    train_step,
-)
+from gcdt.training import TrainConfig, WindowSampler, keep_freed_memory, make_optimizer, train_step
 
 
 def _dataset(episodes: int = 1000, length: int = 50):

@@ -3,8 +3,8 @@
 The library follows one data flow: env -> policy -> collector -> dataset -> trainer ->
 checkpoint -> evaluator -> results -> report. Built so far: the tasks (`gcdt.envs`), the
 policies (`gcdt.policies`), the stepping loop they run in (`gcdt.rollout`), the evaluator
-(`gcdt.evaluation`), the offline datasets (`gcdt.data`), the models (`gcdt.models`) and
-their trainer (`gcdt.training`).
+(`gcdt.evaluation`), the offline datasets (`gcdt.data`), the models (`gcdt.models`),
+their trainer (`gcdt.training`) and its checkpoints (`gcdt.checkpoint`).
 """
 
 from gcdt.errors import GcdtError

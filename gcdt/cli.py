@@ -7,14 +7,18 @@ Bad input, from argparse or from the library (`GcdtError`), ends with one line
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
+import typing
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
-from gcdt.baselines.tqc_her import tqc_config_names
+from gcdt.baselines.tqc_her import RUN_FILES, tqc_config_names
 from gcdt.envs import REWARDS, TASKS
 from gcdt.errors import GcdtError
+from gcdt.evaluation import DEFAULT_TIMESTEPS
 from gcdt.experiments.grid import SECTIONS
 from gcdt.experiments.profiles import PROFILES
 from gcdt.experiments.sweep import BACKENDS
@@ -29,7 +33,24 @@ POLICY_HELP = (
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse, but its errors are one line (no usage block) and exit with status 2."""
+    """argparse, but its errors are one line (no usage block) and exit with status 2.
+
+    `arguments(parser)`, when given, adds the parser's arguments the first time it parses
+    (`gcdt train --help` included): they come from a module that imports torch, which
+    `gcdt --help` and the other commands should not wait for.
+    """
+
+    def __init__(
+        self, *args: Any, arguments: Callable[[_Parser], None] | None = None, **kwargs: Any
+    ) -> None:
+        super().__init__(*args, **kwargs)
+        self.lazy_arguments = arguments
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        if self.lazy_arguments is not None:
+            add, self.lazy_arguments = self.lazy_arguments, None
+            add(self)
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         print(f"gcdt: error: {message}", file=sys.stderr)
@@ -73,18 +94,53 @@ def _npz_path(text: str) -> Path:
     return Path(text)
 
 
+def _add_field_option(parser: Any, field: dataclasses.Field, kind: Any, **settings: Any) -> None:
+    """Option `--field-name` for a dataclass field of type `kind`, parsed into `field.name`:
+    the field's default and help (`metadata["help"]`), and choices (a `Literal`), a switch
+    (`bool`), an integer of at least `metadata["minimum"]`, or `kind` as the type.
+    `settings` adds to or overrides these argparse settings (e.g. `metavar`)."""
+    option: dict[str, Any] = {"default": field.default, "help": field.metadata["help"]}
+    if kind is bool:
+        option["action"] = "store_true"
+    elif typing.get_origin(kind) is typing.Literal:
+        option["choices"] = typing.get_args(kind)
+    elif "minimum" in field.metadata:
+        option["type"] = _int_at_least(field.metadata["minimum"])
+    else:
+        option["type"] = kind
+    if field.default is not None and kind is not bool:
+        option["help"] += " (default: %(default)s)"
+    parser.add_argument(f"--{field.name.replace('_', '-')}", **{**option, **settings})
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="gcdt",
         description="Goal-Conditioned Decision Transformer on panda-gym: datasets and evaluation.",
     )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for add_command in (
+        _evaluate_parser,
+        _collect_parser,
+        _dataset_parser,
+        _train_parser,
+        _tqc_parser,
+        _sweep_parser,
+        _report_parser,
+        _compare_parser,
+        _publish_parser,
+    ):
+        add_command(sub)
+    return parser
 
+
+def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     ev = sub.add_parser(
         "evaluate",
         help="measure a policy's success rate and return",
         description="Run a policy with the paper's protocol: a fixed budget of env steps "
-        "(default 10,000) counting every finished episode, or a fixed number of episodes.",
+        f"(default {DEFAULT_TIMESTEPS:,}) counting every finished episode, or a fixed number "
+        "of episodes.",
     )
     ev.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
     ev.add_argument("--task", required=True, choices=list(TASKS))
@@ -92,7 +148,9 @@ def _build_parser() -> argparse.ArgumentParser:
     budget = ev.add_mutually_exclusive_group()
     budget.add_argument("--episodes", type=_positive_int, help="run this many whole episodes")
     budget.add_argument(
-        "--timesteps", type=_positive_int, help="env steps in total (default 10000)"
+        "--timesteps",
+        type=_positive_int,
+        help=f"env steps in total (default {DEFAULT_TIMESTEPS})",
     )
     ev.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
     ev.add_argument("--seed", type=_int_at_least(0), default=0)
@@ -116,210 +174,6 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     ev.set_defaults(run=_evaluate)
-
-    co = sub.add_parser(
-        "collect",
-        help="collect an offline dataset with a policy",
-        description="Run a policy on parallel envs and save its first whole episodes that "
-        "add up to at least N transitions (both reward types are stored).",
-    )
-    co.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
-    co.add_argument("--task", required=True, choices=list(TASKS))
-    co.add_argument("--transitions", required=True, type=_positive_int, metavar="N")
-    co.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
-    co.add_argument("--seed", type=_int_at_least(0), default=0)
-    co.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
-    co.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
-    co.add_argument("--json", action="store_true", help="print the summary as one JSON line")
-    co.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    co.set_defaults(run=_collect)
-
-    ds = sub.add_parser("dataset", help="inspect, mix, subset, import and export datasets")
-    dsub = ds.add_subparsers(dest="dataset_command", required=True, parser_class=_Parser)
-    info = dsub.add_parser("info", help="summary statistics and metadata of a dataset")
-    info.add_argument("path", type=Path)
-    info.add_argument("--json", action="store_true", help="print summary and metadata as JSON")
-    info.set_defaults(run=_dataset_info)
-
-    mx = dsub.add_parser("mix", help="expert/random mixture by whole episodes (RQ5)")
-    mx.add_argument("--expert", required=True, type=Path)
-    mx.add_argument("--random", required=True, type=Path)
-    mx.add_argument("--ratio", required=True, type=_ratio, help="expert fraction in [0, 1]")
-    mx.add_argument("--size", required=True, type=_positive_int, help="transitions")
-    mx.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
-    mx.add_argument("--seed", type=_int_at_least(0), default=0)
-    mx.set_defaults(run=_dataset_mix)
-
-    sb = dsub.add_parser("subset", help="random whole episodes, about --size transitions (RQ4)")
-    sb.add_argument("path", type=Path)
-    sb.add_argument("--size", required=True, type=_positive_int, help="transitions")
-    sb.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
-    sb.add_argument("--seed", type=_int_at_least(0), default=0)
-    sb.set_defaults(run=_dataset_subset)
-
-    ex = dsub.add_parser("export-minari", help="write a dataset as a local Minari dataset")
-    ex.add_argument("path", type=Path)
-    ex.add_argument("--id", help="Minari id (default panda-gym/<task>/<policy>-v0)")
-    ex.add_argument("--reward", choices=list(REWARDS), default="sparse")
-    ex.set_defaults(run=_dataset_export_minari)
-
-    im = dsub.add_parser("import-minari", help="read a local Minari dataset")
-    im.add_argument("id")
-    im.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
-    im.set_defaults(run=_dataset_import_minari)
-
-    ia = dsub.add_parser("import-authors", help="read the authors' pickled list of episode dicts")
-    ia.add_argument("pickle", type=Path)
-    ia.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
-    ia.add_argument("--task", choices=list(TASKS), help="needed only when widths are ambiguous")
-    ia.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help="allow unpickling, which runs code from the file: only for trusted files",
-    )
-    ia.set_defaults(run=_dataset_import_authors)
-
-    tr = sub.add_parser(
-        "train",
-        help="train GC-DT, a DT ablation or BC on a dataset",
-        description="Train from an offline dataset with the paper's recipe; writes "
-        "checkpoint.pt (usable as evaluate --policy) and train_log.csv into --out.",
-    )
-    tr.add_argument("--dataset", required=True, type=Path, metavar="PATH.npz")
-    tr.add_argument("--out", required=True, type=Path, metavar="DIR")
-    tr.add_argument("--task", choices=list(TASKS), help="refuse a dataset of another task")
-    tr.add_argument("--method", choices=["dt", "bc"], default="dt")
-    tr.add_argument(
-        "--goal-conditioning",
-        choices=["desired+achieved", "desired", "none"],
-        default="desired+achieved",
-        help="what the state holds besides the observation (default: the paper's GC-DT)",
-    )
-    tr.add_argument("--reward", choices=list(REWARDS), default="sparse")
-    budget = tr.add_mutually_exclusive_group()
-    budget.add_argument("--steps", type=_positive_int, help="gradient steps")
-    budget.add_argument(
-        "--epochs", type=_positive_int, help="authors' epochs (default 120), ceil(episodes/batch)"
-    )
-    tr.add_argument("--batch-size", type=_positive_int, default=64)
-    tr.add_argument("--lr", type=float, default=1e-4, help="AdamW peak learning rate")
-    tr.add_argument("--context", type=_positive_int, default=20, metavar="K")
-    tr.add_argument("--seed", type=_int_at_least(0), default=0)
-    tr.add_argument("--device", default="auto", help="auto (CUDA when present), cpu, cuda")
-    tr.add_argument("--bf16", action="store_true", help="bfloat16 autocast")
-    tr.add_argument("--resume", action="store_true", help="continue from --out/checkpoint.pt")
-    tr.add_argument(
-        "--checkpoint-seconds",
-        type=float,
-        metavar="S",
-        help="checkpoint (and write train_log.csv) at least every S seconds, as well "
-        "as every 1000 steps (default 30)",
-    )
-    tr.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    tr.set_defaults(run=_train)
-
-    tq = sub.add_parser("tqc", help="TQC+HER: the online baseline and the paper's expert")
-    tqsub = tq.add_subparsers(dest="tqc_command", required=True, parser_class=_Parser)
-    tt = tqsub.add_parser(
-        "train",
-        help="train TQC+HER online on one task and reward",
-        description="Train sb3-contrib TQC with HER (hyperparameters: gcdt/baselines/"
-        "tqc_her.yaml), evaluating it periodically; writes model.zip, best_model.zip, "
-        "eval.csv and run.json to --out.",
-    )
-    tt.add_argument("--task", required=True, choices=list(TASKS))
-    tt.add_argument("--reward", required=True, choices=list(REWARDS))
-    tt.add_argument("--out", required=True, type=Path, metavar="DIR")
-    tt.add_argument(
-        "--config",
-        default="paper",
-        choices=tqc_config_names(),
-        help="paper: rl-baselines3-zoo her-defaults (GPU-scale); cpu: smaller nets and batches",
-    )
-    tt.add_argument("--steps", type=_positive_int, help="env steps (default: the config's)")
-    tt.add_argument("--seed", type=_int_at_least(0), default=0)
-    tt.add_argument(
-        "--eval-every", type=_positive_int, metavar="N", help="env steps between evaluations"
-    )
-    tt.add_argument("--eval-episodes", type=_positive_int, default=20, metavar="N")
-    tt.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
-    tt.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    tt.set_defaults(run=_tqc_train)
-
-    sw = sub.add_parser(
-        "sweep",
-        help="run the experiment grid of a profile (skips finished runs)",
-        description="Run every run of a profile's grid whose result is not in "
-        "results/PROFILE/runs/ yet; failed and untrusted results are run again.",
-    )
-    sw.add_argument("--profile", required=True, choices=list(PROFILES))
-    sw.add_argument("--backend", default="local", choices=list(BACKENDS))
-    sw.add_argument("--address", help="Ray cluster address HOST:PORT (default: a local Ray)")
-    sw.add_argument("--only", choices=list(SECTIONS), help="one section of the grid")
-    sw.add_argument("--workers", type=_positive_int, help="parallel runs (default: cores)")
-    sw.add_argument(
-        "--dry-run", action="store_true", help="list the runs, their state and estimated cost"
-    )
-    sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    sw.set_defaults(run=_sweep)
-
-    rp = sub.add_parser(
-        "report",
-        help="tables and figures of the paper from results/PROFILE/runs/",
-        description="Write Table 1 and the ablation table (CSV, Markdown, LaTeX) and Fig. 3 "
-        "and 4 (PNG, PDF) from a profile's finished runs.",
-    )
-    rp.add_argument("--profile", required=True, choices=list(PROFILES))
-    rp.add_argument("--readme", action="store_true", help="also update README.md's results")
-    rp.add_argument(
-        "--wall-seconds",
-        type=float,
-        metavar="S",
-        help="record S as the wall time of the `make reproduce` that made these "
-        "results (results/PROFILE/reproduce.json)",
-    )
-    rp.add_argument(
-        "--backend",
-        default="local",
-        choices=list(BACKENDS),
-        help="the backend of that `make reproduce` (with --wall-seconds)",
-    )
-    rp.set_defaults(run=_report_cmd)
-
-    cmp = sub.add_parser(
-        "compare",
-        help="check a reproduction against the published results",
-        description="For every Table 1 cell, ablation cell and Fig. 3/4 point: the published "
-        "value and its 95 % interval, yours, the difference, and whether yours lies inside. "
-        "Writes results/PROFILE/reproduction_check.{csv,md} under --ours.",
-    )
-    cmp.add_argument("--profile", required=True, choices=list(PROFILES))
-    cmp.add_argument(
-        "--ours",
-        type=Path,
-        metavar="DIR",
-        help="the reproduction's folder, "
-        "holding results/PROFILE/runs/ (default: $GCDT_OUTPUTS, else "
-        "artifacts/reproduce)",
-    )
-    cmp.set_defaults(run=_compare)
-
-    pb = sub.add_parser(
-        "publish",
-        help="(maintainers) make a finished reproduction the published results",
-        description="Mirror results/PROFILE/ and figures/PROFILE/ of a finished reproduction "
-        "into the repository's; unchanged files are left untouched.",
-    )
-    pb.add_argument("--profile", required=True, choices=list(PROFILES))
-    pb.add_argument(
-        "--from",
-        dest="source",
-        type=Path,
-        metavar="DIR",
-        help="the reproduction's folder (default: $GCDT_OUTPUTS, else artifacts/reproduce)",
-    )
-    pb.set_defaults(run=_publish)
-    return parser
 
 
 def _evaluate(args: argparse.Namespace) -> int:
@@ -398,6 +252,25 @@ def _report(dataset, path: Path | None, as_json: bool) -> None:
     )
 
 
+def _collect_parser(sub: argparse._SubParsersAction) -> None:
+    co = sub.add_parser(
+        "collect",
+        help="collect an offline dataset with a policy",
+        description="Run a policy on parallel envs and save its first whole episodes that "
+        "add up to at least N transitions (both reward types are stored).",
+    )
+    co.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
+    co.add_argument("--task", required=True, choices=list(TASKS))
+    co.add_argument("--transitions", required=True, type=_positive_int, metavar="N")
+    co.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
+    co.add_argument("--seed", type=_int_at_least(0), default=0)
+    co.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
+    co.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
+    co.add_argument("--json", action="store_true", help="print the summary as one JSON line")
+    co.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    co.set_defaults(run=_collect)
+
+
 def _collect(args: argparse.Namespace) -> int:
     from gcdt.data import collect
     from gcdt.policies import make_policy
@@ -417,6 +290,53 @@ def _collect(args: argparse.Namespace) -> int:
     dataset = dataset.with_metadata(command=_command(args))
     _report(dataset, dataset.save(args.out), args.json)
     return 0
+
+
+def _dataset_parser(sub: argparse._SubParsersAction) -> None:
+    ds = sub.add_parser("dataset", help="inspect, mix, subset, import and export datasets")
+    dsub = ds.add_subparsers(dest="dataset_command", required=True, parser_class=_Parser)
+    info = dsub.add_parser("info", help="summary statistics and metadata of a dataset")
+    info.add_argument("path", type=Path)
+    info.add_argument("--json", action="store_true", help="print summary and metadata as JSON")
+    info.set_defaults(run=_dataset_info)
+
+    mx = dsub.add_parser("mix", help="expert/random mixture by whole episodes (RQ5)")
+    mx.add_argument("--expert", required=True, type=Path)
+    mx.add_argument("--random", required=True, type=Path)
+    mx.add_argument("--ratio", required=True, type=_ratio, help="expert fraction in [0, 1]")
+    mx.add_argument("--size", required=True, type=_positive_int, help="transitions")
+    mx.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
+    mx.add_argument("--seed", type=_int_at_least(0), default=0)
+    mx.set_defaults(run=_dataset_mix)
+
+    sb = dsub.add_parser("subset", help="random whole episodes, about --size transitions (RQ4)")
+    sb.add_argument("path", type=Path)
+    sb.add_argument("--size", required=True, type=_positive_int, help="transitions")
+    sb.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
+    sb.add_argument("--seed", type=_int_at_least(0), default=0)
+    sb.set_defaults(run=_dataset_subset)
+
+    ex = dsub.add_parser("export-minari", help="write a dataset as a local Minari dataset")
+    ex.add_argument("path", type=Path)
+    ex.add_argument("--id", help="Minari id (default panda-gym/<task>/<policy>-v0)")
+    ex.add_argument("--reward", choices=list(REWARDS), default="sparse")
+    ex.set_defaults(run=_dataset_export_minari)
+
+    im = dsub.add_parser("import-minari", help="read a local Minari dataset")
+    im.add_argument("id")
+    im.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
+    im.set_defaults(run=_dataset_import_minari)
+
+    ia = dsub.add_parser("import-authors", help="read the authors' pickled list of episode dicts")
+    ia.add_argument("pickle", type=Path)
+    ia.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
+    ia.add_argument("--task", choices=list(TASKS), help="needed only when widths are ambiguous")
+    ia.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help="allow unpickling, which runs code from the file: only for trusted files",
+    )
+    ia.set_defaults(run=_dataset_import_authors)
 
 
 def _dataset_info(args: argparse.Namespace) -> int:
@@ -479,6 +399,36 @@ def _dataset_import_authors(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train_parser(sub: argparse._SubParsersAction) -> None:
+    sub.add_parser(
+        "train",
+        help="train GC-DT, a DT ablation or BC on a dataset",
+        arguments=_train_arguments,
+    ).set_defaults(run=_train)
+
+
+def _train_arguments(tr: argparse.ArgumentParser) -> None:
+    """`gcdt train`'s arguments: its files, and an option per `TrainConfig` field."""
+    from gcdt.checkpoint import CHECKPOINT_NAME
+    from gcdt.training import LOG_NAME, TrainConfig
+
+    tr.description = (
+        f"Train from an offline dataset with the paper's recipe; writes {CHECKPOINT_NAME} "
+        f"(usable as evaluate --policy) and {LOG_NAME} into --out."
+    )
+    tr.add_argument("--dataset", required=True, type=Path, metavar="PATH.npz")
+    tr.add_argument("--out", required=True, type=Path, metavar="DIR")
+    tr.add_argument("--task", choices=list(TASKS), help="refuse a dataset of another task")
+    budget = tr.add_mutually_exclusive_group()  # steps or epochs
+    kinds = typing.get_type_hints(TrainConfig)
+    settings = {"context": {"metavar": "K"}, "checkpoint_seconds": {"metavar": "S"}}
+    for field in dataclasses.fields(TrainConfig):
+        group = budget if field.name in ("steps", "epochs") else tr
+        _add_field_option(group, field, kinds[field.name], **settings.get(field.name, {}))
+    tr.add_argument("--resume", action="store_true", help=f"continue from --out/{CHECKPOINT_NAME}")
+    tr.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
 def _train(args: argparse.Namespace) -> int:
     from gcdt.data import load_dataset
     from gcdt.training import TrainConfig, train
@@ -487,28 +437,42 @@ def _train(args: argparse.Namespace) -> int:
     dataset = load_dataset(args.dataset)
     if args.task is not None and dataset.task != args.task:
         raise GcdtError(f"{args.dataset} holds {dataset.task!r} data, not {args.task!r}")
-    given = {"checkpoint_seconds": args.checkpoint_seconds}
-    schedule = {k: v for k, v in given.items() if v is not None}  # else TrainConfig's default
-    cfg = TrainConfig(
-        method=args.method,
-        goal_conditioning=args.goal_conditioning,
-        reward=args.reward,
-        steps=args.steps,
-        epochs=args.epochs,
-        batch_size=args.batch_size,
-        lr=args.lr,
-        context=args.context,
-        seed=args.seed,
-        device=args.device,
-        bf16=args.bf16,
-        **schedule,
-    )
+    cfg = TrainConfig(**{f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig)})
     result = train(dataset, cfg, args.out, resume=args.resume, progress=not args.no_progress)
     print(
         f"trained {result.steps} steps in {result.seconds:.0f} s, final loss "
         f"{result.final_loss:.4f}: {result.checkpoint}"
     )
     return 0
+
+
+def _tqc_parser(sub: argparse._SubParsersAction) -> None:
+    tq = sub.add_parser("tqc", help="TQC+HER: the online baseline and the paper's expert")
+    tqsub = tq.add_subparsers(dest="tqc_command", required=True, parser_class=_Parser)
+    tt = tqsub.add_parser(
+        "train",
+        help="train TQC+HER online on one task and reward",
+        description="Train sb3-contrib TQC with HER (hyperparameters: gcdt/baselines/"
+        f"tqc_her.yaml), evaluating it periodically; writes {', '.join(RUN_FILES)} to --out.",
+    )
+    tt.add_argument("--task", required=True, choices=list(TASKS))
+    tt.add_argument("--reward", required=True, choices=list(REWARDS))
+    tt.add_argument("--out", required=True, type=Path, metavar="DIR")
+    tt.add_argument(
+        "--config",
+        default="paper",
+        choices=tqc_config_names(),
+        help="paper: rl-baselines3-zoo her-defaults (GPU-scale); cpu: smaller nets and batches",
+    )
+    tt.add_argument("--steps", type=_positive_int, help="env steps (default: the config's)")
+    tt.add_argument("--seed", type=_int_at_least(0), default=0)
+    tt.add_argument(
+        "--eval-every", type=_positive_int, metavar="N", help="env steps between evaluations"
+    )
+    tt.add_argument("--eval-episodes", type=_positive_int, default=20, metavar="N")
+    tt.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
+    tt.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    tt.set_defaults(run=_tqc_train)
 
 
 def _tqc_train(args: argparse.Namespace) -> int:
@@ -538,6 +502,25 @@ def _tqc_train(args: argparse.Namespace) -> int:
         f"{result.model}"
     )
     return 0
+
+
+def _sweep_parser(sub: argparse._SubParsersAction) -> None:
+    sw = sub.add_parser(
+        "sweep",
+        help="run the experiment grid of a profile (skips finished runs)",
+        description="Run every run of a profile's grid whose result is not in "
+        "results/PROFILE/runs/ yet; failed and untrusted results are run again.",
+    )
+    sw.add_argument("--profile", required=True, choices=list(PROFILES))
+    sw.add_argument("--backend", default="local", choices=list(BACKENDS))
+    sw.add_argument("--address", help="Ray cluster address HOST:PORT (default: a local Ray)")
+    sw.add_argument("--only", choices=list(SECTIONS), help="one section of the grid")
+    sw.add_argument("--workers", type=_positive_int, help="parallel runs (default: cores)")
+    sw.add_argument(
+        "--dry-run", action="store_true", help="list the runs, their state and estimated cost"
+    )
+    sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    sw.set_defaults(run=_sweep)
 
 
 def _sweep(args: argparse.Namespace) -> int:
@@ -580,6 +563,31 @@ def _sweep(args: argparse.Namespace) -> int:
     return 0 if summary.ok else 1
 
 
+def _report_parser(sub: argparse._SubParsersAction) -> None:
+    rp = sub.add_parser(
+        "report",
+        help="tables and figures of the paper from results/PROFILE/runs/",
+        description="Write Table 1 and the ablation table (CSV, Markdown, LaTeX) and Fig. 3 "
+        "and 4 (PNG, PDF) from a profile's finished runs.",
+    )
+    rp.add_argument("--profile", required=True, choices=list(PROFILES))
+    rp.add_argument("--readme", action="store_true", help="also update README.md's results")
+    rp.add_argument(
+        "--wall-seconds",
+        type=float,
+        metavar="S",
+        help="record S as the wall time of the `make reproduce` that made these "
+        "results (results/PROFILE/reproduce.json)",
+    )
+    rp.add_argument(
+        "--backend",
+        default="local",
+        choices=list(BACKENDS),
+        help="the backend of that `make reproduce` (with --wall-seconds)",
+    )
+    rp.set_defaults(run=_report_cmd)
+
+
 def _report_cmd(args: argparse.Namespace) -> int:
     from gcdt.experiments import get_profile
     from gcdt.paths import REPO_ROOT
@@ -611,6 +619,26 @@ def _reproduction_dir(given: Path | None) -> Path:
     return folder
 
 
+def _compare_parser(sub: argparse._SubParsersAction) -> None:
+    cmp = sub.add_parser(
+        "compare",
+        help="check a reproduction against the published results",
+        description="For every Table 1 cell, ablation cell and Fig. 3/4 point: the published "
+        "value and its 95 % interval, yours, the difference, and whether yours lies inside. "
+        "Writes results/PROFILE/reproduction_check.{csv,md} under --ours.",
+    )
+    cmp.add_argument("--profile", required=True, choices=list(PROFILES))
+    cmp.add_argument(
+        "--ours",
+        type=Path,
+        metavar="DIR",
+        help="the reproduction's folder, "
+        "holding results/PROFILE/runs/ (default: $GCDT_OUTPUTS, else "
+        "artifacts/reproduce)",
+    )
+    cmp.set_defaults(run=_compare)
+
+
 def _compare(args: argparse.Namespace) -> int:
     from gcdt.experiments import get_profile
     from gcdt.report.reproduction import write_check
@@ -620,6 +648,24 @@ def _compare(args: argparse.Namespace) -> int:
     if path is not None:
         print(f"\n(written to {path})")
     return 0
+
+
+def _publish_parser(sub: argparse._SubParsersAction) -> None:
+    pb = sub.add_parser(
+        "publish",
+        help="(maintainers) make a finished reproduction the published results",
+        description="Mirror results/PROFILE/ and figures/PROFILE/ of a finished reproduction "
+        "into the repository's; unchanged files are left untouched.",
+    )
+    pb.add_argument("--profile", required=True, choices=list(PROFILES))
+    pb.add_argument(
+        "--from",
+        dest="source",
+        type=Path,
+        metavar="DIR",
+        help="the reproduction's folder (default: $GCDT_OUTPUTS, else artifacts/reproduce)",
+    )
+    pb.set_defaults(run=_publish)
 
 
 def _publish(args: argparse.Namespace) -> int:

@@ -139,9 +139,10 @@ def make_env(task: str, reward: str, *, render_mode: str = "rgb_array", **kwargs
 
 
 def make_vec_env(
-    task: str, reward: str, n_envs: int, *, context: str | None = "spawn"
+    task: str, reward: str, n_envs: int, *, context: str | None = "spawn", **env_kwargs
 ) -> gym.vector.VectorEnv:
     """`n_envs` copies of the env: in-process for one, one process each (`AsyncVectorEnv`) else.
+    `env_kwargs` go to `make_env` (e.g. `render_width`).
 
     Autoreset is disabled: the caller resets finished envs itself, with explicit seeds
     (`reset(seed=[...], options={"reset_mask": done})`), because panda-gym's own seed-less
@@ -151,7 +152,7 @@ def make_vec_env(
     if not isinstance(n_envs, int | np.integer) or n_envs < 1:
         raise GcdtError(f"n_envs must be a positive integer, got {n_envs!r}")
     env_id(task, reward)  # validate names in this process, before any worker starts
-    factory = functools.partial(make_env, task, reward)
+    factory = functools.partial(make_env, task, reward, **env_kwargs)
     mode = gym.vector.AutoresetMode.DISABLED
     if n_envs == 1:
         return gym.vector.SyncVectorEnv([factory], autoreset_mode=mode)

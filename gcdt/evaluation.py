@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from gcdt.envs import check_reward, episode_seed, get_task, goal_distance, make_env
+from gcdt.envs import episode_seed, goal_distance
 from gcdt.errors import GcdtError
 from gcdt.paths import write_if_changed
 from gcdt.policies.base import Policy
@@ -205,27 +205,20 @@ def record_rollout(
     """
     from PIL import Image
 
-    check_reward(reward)
-    if policy.task != get_task(task).name:
-        raise GcdtError(f"policy is for task {policy.task!r}, not {task!r}")
-    env = make_env(task, reward, render_width=size, render_height=size)
-    try:
-        policy.reset(1, seed)
-        obs, _ = env.reset(seed=episode_seed(seed, 0))
+    frames: list[np.ndarray] = []
+
+    def render(_: object = None) -> None:  # also the last frame, before the env resets
+        frames.append(rollout.envs.render()[0])
+
+    size_kwargs = {"render_width": size, "render_height": size}
+    rollout = VectorRollout(policy, task, reward, 1, seed, env_kwargs=size_kwargs, on_step=render)
+    with rollout:
         if goal is not None:
-            obs = _set_goal(env, np.asarray(goal, dtype=np.float64))
-        frames = [env.render()]
-        start, last_reward = True, 0.0
-        while True:
-            batch = {k: v[None] for k, v in obs.items()}
-            action = policy.predict(batch, np.array([start]), np.array([last_reward]))[0]
-            obs, last_reward, terminated, truncated, _ = env.step(action)
-            frames.append(env.render())
-            start = False
-            if terminated or truncated:
-                break
-    finally:
-        env.close()
+            obs = _set_goal(rollout.envs.envs[0], np.asarray(goal, dtype=np.float64))
+            rollout.obs = {k: v[None] for k, v in obs.items()}
+        render()
+        while not rollout.step().done[0]:
+            pass
     if path is not None:
         images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
         gif = io.BytesIO()
@@ -242,10 +235,17 @@ def record_rollout(
 
 
 def _set_goal(env, goal: np.ndarray) -> dict[str, np.ndarray]:
-    """Give a freshly reset panda-gym env another desired goal; its new observation."""
-    task = env.unwrapped.task
-    if goal.shape != task.goal.shape:
-        raise GcdtError(f"goal must have {task.goal.size} coordinates, got {goal.tolist()}")
+    """Give a freshly reset panda-gym env another desired goal; its new observation, built
+    from the robot's and the task's public getters as panda-gym's `RobotTaskEnv` builds it."""
+    robot, task = env.unwrapped.robot, env.unwrapped.task
+    if goal.shape != task.get_goal().shape:
+        raise GcdtError(f"goal must have {task.get_goal().size} coordinates, got {goal.tolist()}")
     task.goal = goal
     env.unwrapped.sim.set_base_pose("target", goal, np.array([0.0, 0.0, 0.0, 1.0]))
-    return env.unwrapped._get_obs()
+    return {
+        "observation": np.concatenate(
+            [robot.get_obs().astype(np.float32), task.get_obs().astype(np.float32)]
+        ),
+        "achieved_goal": task.get_achieved_goal().astype(np.float32),
+        "desired_goal": task.get_goal().astype(np.float32),
+    }

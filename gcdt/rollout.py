@@ -9,7 +9,9 @@ loop itself, the seeding and the per-env episode bookkeeping live only here.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -39,12 +41,25 @@ class VectorStep:
 class VectorRollout:
     """Context manager: `with VectorRollout(policy, task, reward, n_envs, seed) as r: r.step()`.
 
-    Each `step()` advances every env once and then resets the envs whose episode ended, with
-    the next episode indices in env order. The run is deterministic for a given `seed` and
-    `n_envs` (each env then sees the same history; see `gcdt.envs` on Bullet's warm starts).
+    Each `step()` advances every env once, calls `on_step` with that step (while the envs
+    still show its end: the place to render a frame), and then resets the envs whose episode
+    ended, with the next episode indices in env order. The run is deterministic for a given
+    `seed` and `n_envs` (each env then sees the same history; see `gcdt.envs` on Bullet's warm
+    starts). `env_kwargs` go to each env's constructor (e.g. `render_width`). `obs`, the
+    observation the next step acts in, may be replaced after a change to the envs.
     """
 
-    def __init__(self, policy: Policy, task: str, reward: str, n_envs: int, seed: int) -> None:
+    def __init__(
+        self,
+        policy: Policy,
+        task: str,
+        reward: str,
+        n_envs: int,
+        seed: int,
+        *,
+        env_kwargs: Mapping[str, Any] | None = None,
+        on_step: Callable[[VectorStep], None] | None = None,
+    ) -> None:
         spec = get_task(task)
         check_reward(reward)
         if policy.task != spec.name:
@@ -61,10 +76,11 @@ class VectorRollout:
             raise GcdtError(f"seed must be a non-negative integer, got {seed!r}")
         self.policy, self.task, self.reward = policy, spec.name, reward
         self.n_envs, self.seed = int(n_envs), int(seed)
+        self.env_kwargs, self.on_step = dict(env_kwargs or {}), on_step
         self.stepping_started = 0.0  # perf_counter() once the envs are up and reset
 
     def __enter__(self) -> VectorRollout:
-        self.envs = make_vec_env(self.task, self.reward, self.n_envs)
+        self.envs = make_vec_env(self.task, self.reward, self.n_envs, **self.env_kwargs)
         try:
             self.policy.reset(self.n_envs, self.seed)
             self.episode = np.arange(self.n_envs, dtype=np.int64)
@@ -102,6 +118,8 @@ class VectorRollout:
             truncated=np.asarray(truncated, dtype=bool),
             success=np.asarray(info["is_success"], dtype=bool),
         )
+        if self.on_step is not None:
+            self.on_step(step)
         done = step.done
         self.obs = next_obs
         if done.any():

@@ -7,8 +7,10 @@ Windows start at a transition drawn uniformly from the whole dataset, which is e
 authors' "episode in proportion to its length, then a uniform start within it".
 
 A budget is gradient steps, or the authors' epochs of ceil(#episodes / batch) steps each.
-Checkpoints hold everything needed to resume (weights, optimiser, schedule, RNG states), and
-on CPU a resumed run ends with the same weights as an uninterrupted one.
+Checkpoints (`gcdt.checkpoint`) hold everything needed to resume (weights, optimiser,
+schedule, RNG states), and on CPU a resumed run ends with the same weights as an
+uninterrupted one. `TrainConfig` declares every setting once, with its help text, and
+`gcdt train` takes each as an option.
 """
 
 from __future__ import annotations
@@ -19,60 +21,93 @@ import functools
 import math
 import platform
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 import numpy as np
 import torch
 
+from gcdt.checkpoint import (
+    CHECKPOINT_FORMAT,
+    CHECKPOINT_NAME,
+    CHECKPOINT_VERSION,
+    MODELS,
+    build_model,
+    load_checkpoint,
+    save_checkpoint,
+)
 from gcdt.data.dataset import Dataset
-from gcdt.envs import check_reward
+from gcdt.device import resolve_device
+from gcdt.envs import RewardType, check_reward
 from gcdt.errors import GcdtError
-from gcdt.models import BCConfig, BCPolicyNet, DTConfig, GoalConditionedDT, state_columns
+from gcdt.models import DTConfig, GoalConditioning, state_columns
 from gcdt.paths import atomic_write
 from gcdt.progress import progress_bar
 from gcdt.provenance import package_versions, utc_now
 
 Method = Literal["dt", "bc"]
-METHODS: tuple[str, ...] = ("dt", "bc")
-CHECKPOINT_FORMAT = "gcdt.checkpoint"
-CHECKPOINT_VERSION = 1
-CHECKPOINT_NAME = "checkpoint.pt"
+METHODS: tuple[str, ...] = get_args(Method)
 LOG_NAME = "train_log.csv"
 PAPER_EPOCHS = 120
 #: TrainConfig fields that only decide when checkpoints are written, not what is learnt:
 #: a run may be resumed with other values.
 SCHEDULING_FIELDS = ("checkpoint_every", "checkpoint_seconds")
+#: The model's shape defaults are `DTConfig`'s (BC shares its width, depth and dropout).
+_MODEL_DEFAULTS = {f.name: f.default for f in fields(DTConfig)}
+
+
+def _setting(default: Any, help: str, *, minimum: int | None = None) -> Any:
+    """A `TrainConfig` field: its default, what it means (`gcdt train --help` shows it), and
+    for an integer the least value it may take."""
+    metadata = {"help": help} if minimum is None else {"help": help, "minimum": minimum}
+    return field(default=default, metadata=metadata)
 
 
 @dataclass(frozen=True)
 class TrainConfig:
     """What to train and how; the defaults are the paper's."""
 
-    method: Method = "dt"
-    goal_conditioning: str = "desired+achieved"  # "desired+achieved" = the paper's GC-DT
-    reward: str = "sparse"  # which rewards make the returns-to-go
-    steps: int | None = None  # gradient steps; or
-    epochs: int | None = None  # the authors' epochs of ceil(#episodes / batch_size) steps;
-    # neither given: the paper's 120 epochs
-    batch_size: int = 64
-    lr: float = 1e-4
-    weight_decay: float = 1e-4
-    warmup_fraction: float = 0.1
-    grad_clip: float = 0.25
-    return_scale: float = 100.0
-    context: int = 20  # K (DT only)
-    hidden: int = 128
-    layers: int = 3
-    heads: int = 1
-    dropout: float = 0.1
-    seed: int = 0
-    device: str = "auto"  # "auto" = CUDA when present, else CPU
-    bf16: bool = False  # bfloat16 autocast for the forward pass
-    log_every: int = 50
-    checkpoint_every: int = 1000  # a checkpoint every this many steps,
-    checkpoint_seconds: float = 30.0  # and whenever this many seconds passed since the last
+    method: Method = _setting("dt", "dt: a Decision Transformer; bc: behavioural cloning")
+    goal_conditioning: GoalConditioning = _setting(
+        "desired+achieved",
+        "what the state holds besides the observation; desired+achieved is the paper's GC-DT",
+    )
+    reward: RewardType = _setting("sparse", "the rewards that make the returns-to-go")
+    steps: int | None = _setting(None, "gradient steps", minimum=1)
+    epochs: int | None = _setting(
+        None,
+        "the authors' epochs of ceil(#episodes / batch size) steps; "
+        f"neither steps nor epochs given: {PAPER_EPOCHS} epochs",
+        minimum=1,
+    )
+    batch_size: int = _setting(64, "windows (DT) or transitions (BC) per step", minimum=1)
+    lr: float = _setting(1e-4, "AdamW peak learning rate")
+    weight_decay: float = _setting(1e-4, "AdamW weight decay")
+    warmup_fraction: float = _setting(0.1, "share of the steps of linear warm-up, then decay")
+    grad_clip: float = _setting(0.25, "gradient-norm clip")
+    return_scale: float = _setting(100.0, "returns-to-go are divided by this")
+    context: int = _setting(
+        _MODEL_DEFAULTS["context"],
+        "K, the steps a DT sees (return-to-go, state, action)",
+        minimum=1,
+    )
+    hidden: int = _setting(_MODEL_DEFAULTS["hidden"], "the model's width", minimum=1)
+    layers: int = _setting(
+        _MODEL_DEFAULTS["layers"], "transformer blocks, or BC's hidden layers", minimum=1
+    )
+    heads: int = _setting(_MODEL_DEFAULTS["heads"], "attention heads (DT)", minimum=1)
+    dropout: float = _setting(_MODEL_DEFAULTS["dropout"], "dropout probability")
+    seed: int = _setting(0, "seeds the initial weights, dropout and batches", minimum=0)
+    device: str = _setting("auto", "auto (CUDA when present, else CPU), cpu, cuda or cuda:N")
+    bf16: bool = _setting(False, "bfloat16 autocast for the forward pass")
+    log_every: int = _setting(50, "a train_log.csv row every this many steps", minimum=1)
+    checkpoint_every: int = _setting(1000, "a checkpoint every this many steps", minimum=1)
+    checkpoint_seconds: float = _setting(
+        30.0,
+        "at most this many seconds between checkpoints (and log writes), besides one "
+        "every checkpoint_every steps",
+    )
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -80,10 +115,13 @@ class TrainConfig:
         check_reward(self.reward)
         if self.steps is not None and self.epochs is not None:
             raise GcdtError("give one budget, steps or epochs, not both")
-        for name in ("steps", "epochs", "batch_size", "context", "log_every", "checkpoint_every"):
-            value = getattr(self, name)
-            if value is not None and (not isinstance(value, int) or value < 1):
-                raise GcdtError(f"{name} must be a positive integer, got {value!r}")
+        for f in fields(self):
+            minimum, value = f.metadata.get("minimum"), getattr(self, f.name)
+            if minimum is None or value is None:
+                continue
+            if not isinstance(value, int) or value < minimum:
+                wanted = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
+                raise GcdtError(f"{f.name} must be {wanted}, got {value!r}")
         if not self.lr > 0:
             raise GcdtError(f"lr must be > 0, got {self.lr!r}")
         if isinstance(self.checkpoint_seconds, bool) or not self.checkpoint_seconds > 0:
@@ -94,34 +132,13 @@ class TrainConfig:
             return self.steps
         return (self.epochs or PAPER_EPOCHS) * math.ceil(n_episodes / self.batch_size)
 
-
-def method_label(method: str, goal_conditioning: str) -> str:
-    """How results name a method: `gcdt` (the paper's), `dt` (no goals), `dt-desired`, `bc`."""
-    if method == "bc":
-        return "bc"
-    return {"desired+achieved": "gcdt", "none": "dt"}.get(goal_conditioning, "dt-desired")
-
-
-def resolve_device(device: str) -> torch.device:
-    """`auto` (CUDA when present, else CPU), `cpu`, `cuda` or `cuda:N`, checked here so that
-    a wrong name or a missing GPU fails at once with a fix, not deep inside a run."""
-    if device == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        resolved = torch.device(device)
-    except (RuntimeError, TypeError):
-        resolved = None
-    if resolved is None or resolved.type not in ("cpu", "cuda"):
-        raise GcdtError(f"unknown device {device!r}: use auto, cpu, cuda or cuda:N")
-    if resolved.type == "cuda" and not torch.cuda.is_available():
-        raise GcdtError(f"device {device!r}: this torch sees no CUDA GPU; use cpu or auto")
-    return resolved
-
-
-def build_model(method: str, model_config: dict[str, Any]) -> torch.nn.Module:
-    if method == "dt":
-        return GoalConditionedDT(DTConfig(**model_config))
-    return BCPolicyNet(BCConfig(**model_config))
+    def model_config(self, state_dim: int, action_dim: int) -> dict[str, Any]:
+        """The config of the model to train, as a checkpoint stores it: `DTConfig` or
+        `BCConfig` with this config's values of their fields (context, hidden, ...)."""
+        config_class = MODELS[self.method][0]
+        own = {f.name for f in fields(self)}
+        shape = {f.name: getattr(self, f.name) for f in fields(config_class) if f.name in own}
+        return asdict(config_class(state_dim, action_dim, **shape))
 
 
 class WindowSampler:
@@ -149,7 +166,7 @@ class WindowSampler:
         self.actions = put(dataset.actions)
         self.rtg = put(rtg.astype(np.float32))
         # Episodes longer than the timestep table share its last entry, as in the policy.
-        last_timestep = DTConfig.__dataclass_fields__["max_episode_steps"].default - 1
+        last_timestep = _MODEL_DEFAULTS["max_episode_steps"] - 1
         self.timesteps = put(np.minimum(dataset.timesteps, last_timestep))
         self.ends = put(dataset.offsets[1:][dataset.episode_index])  # episode end of each row
         self.n, self.k, self.batch = len(dataset), cfg.context, cfg.batch_size
@@ -271,15 +288,7 @@ def train(
         keep_freed_memory()
     cols = state_columns(dataset.task, cfg.goal_conditioning)
     total = cfg.total_steps(dataset.n_episodes)
-    state_dim, action_dim = cols.stop, dataset.spec.action_dim
-    if cfg.method == "dt":
-        model_config = asdict(
-            DTConfig(
-                state_dim, action_dim, cfg.context, cfg.hidden, cfg.layers, cfg.heads, cfg.dropout
-            )
-        )
-    else:
-        model_config = asdict(BCConfig(state_dim, action_dim, cfg.hidden, cfg.layers, cfg.dropout))
+    model_config = cfg.model_config(cols.stop, dataset.spec.action_dim)
 
     torch.manual_seed(cfg.seed)
     model = build_model(cfg.method, model_config).to(device)
@@ -429,30 +438,3 @@ def _write_log(path: Path, history: list[dict[str, float]]) -> None:
         writer = csv.DictWriter(f, fieldnames=["step", "loss", "lr", "seconds"])
         writer.writeheader()
         writer.writerows(history)
-
-
-def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
-    """`torch.save` through a temp file and a rename: never half a checkpoint."""
-    with atomic_write(path, binary=True) as f:
-        torch.save(payload, f)
-
-
-def load_checkpoint(path: str | Path) -> dict[str, Any]:
-    """A checkpoint written by `train`, loaded without running code (`weights_only`)."""
-    path = Path(path)
-    if not path.is_file():
-        raise GcdtError(f"checkpoint {str(path)!r} does not exist")
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as err:
-        raise GcdtError(
-            f"{path} is not a readable gcdt checkpoint ({type(err).__name__})"
-        ) from None
-    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
-        raise GcdtError(f"{path} is not a gcdt checkpoint")
-    if ckpt.get("version") != CHECKPOINT_VERSION:
-        raise GcdtError(
-            f"{path} has checkpoint version {ckpt.get('version')}, this gcdt reads "
-            f"{CHECKPOINT_VERSION}: retrain it"
-        )
-    return ckpt

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -147,6 +148,31 @@ def test_evaluate_out_writes_full_result(tmp_path, capsys):
     assert len(record["episodes"]) == record["summary"]["episodes"]
     assert sum(e["length"] for e in record["episodes"]) <= 120
     assert [p.name for p in out.parent.iterdir()] == ["reach.json"]  # no temp file left
+
+
+def test_train_options_are_trainconfig_fields():
+    """`gcdt train` has an option per `TrainConfig` field, with the field's default."""
+    from gcdt.cli import _build_parser
+    from gcdt.training import TrainConfig
+
+    args = _build_parser().parse_args(["train", "--dataset", "d.npz", "--out", "o"])
+    fields = dataclasses.fields(TrainConfig)
+    assert TrainConfig(**{f.name: getattr(args, f.name) for f in fields}) == TrainConfig()
+    argv = ["train", "--dataset", "d.npz", "--out", "o", "--batch-size", "8", "--bf16"]
+    args = _build_parser().parse_args([*argv, "--goal-conditioning", "none"])
+    assert (args.batch_size, args.bf16, args.goal_conditioning) == (8, True, "none")
+
+
+def test_only_train_imports_torch():
+    """The other commands, and `gcdt --help`, never wait for torch: `gcdt train` adds its
+    options (from `TrainConfig`) when it parses."""
+    code = (
+        "import sys; from gcdt.cli import _build_parser; "
+        "_build_parser().parse_args(['dataset', 'info', 'x.npz']); "
+        "print('torch' in sys.modules)"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.stdout.strip() == "False", proc.stderr
 
 
 # --- datasets -----------------------------------------------------------------------------

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 import torch
 
+from gcdt.checkpoint import load_checkpoint
 from gcdt.models import DTConfig, GoalConditionedDT
 from gcdt.policies.trained import TrainedPolicy
-from gcdt.training import TrainConfig, load_checkpoint, train
+from gcdt.training import TrainConfig, train
 
 pytestmark = [
     pytest.mark.cuda,

@@ -146,3 +146,22 @@ def test_record_rollout_writes_gif(tmp_path):
     gif = Image.open(path)
     assert gif.n_frames == len(frames)
     assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_record_rollout_with_a_goal():
+    """`goal` replaces the episode's desired goal: the policy sees it from the first step on,
+    and the scripted expert reaches it (success ends the episode early)."""
+    expert, seen = ScriptedExpert("reach"), []
+    predict = expert.predict
+
+    def watching(obs, episode_start, reward):
+        seen.append(obs["desired_goal"][0].copy())
+        return predict(obs, episode_start, reward)
+
+    expert.predict = watching
+    goal = np.array([0.05, -0.05, 0.15])
+    frames = record_rollout(expert, "reach", "sparse", seed=0, size=32, goal=goal)
+    assert len(frames) == len(seen) + 1 and len(seen) < 50
+    np.testing.assert_array_equal(np.array(seen), np.tile(goal.astype(np.float32), (len(seen), 1)))
+    with pytest.raises(GcdtError, match=r"goal must have 3 coordinates, got \[0.0, 0.0\]"):
+        record_rollout(expert, "reach", "sparse", goal=np.zeros(2))

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from gcdt.checkpoint import load_checkpoint
 from gcdt.data import load_dataset
 from gcdt.errors import GcdtError
 from gcdt.experiments import (
@@ -27,7 +28,6 @@ from gcdt.experiments import (
 )
 from gcdt.experiments.grid import RUN_SCHEMA
 from gcdt.experiments.profiles import SMOKE, Scope
-from gcdt.training import load_checkpoint
 
 ONE = Scope(tasks=("reach",), rewards=("sparse",))
 #: Seven real runs on Reach in well under a minute: Table 1 (GC-DT, BC, TQC+HER), one RQ4

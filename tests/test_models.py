@@ -1,4 +1,6 @@
-"""gcdt.models: shapes, causality, left padding, goal conditioning, the fast paths."""
+"""gcdt.models: shapes, causality, left padding, goal conditioning; and the seam's contract:
+`gcdt.fast_forward`, the default path, computes what the reference code of `gcdt.models`
+computes (`GoalConditionedDT(cfg, fast=False)`)."""
 
 from __future__ import annotations
 
@@ -6,17 +8,10 @@ import numpy as np
 import pytest
 import torch
 
+from gcdt import fast_forward
 from gcdt.errors import GcdtError
-from gcdt.models import (
-    BCConfig,
-    BCPolicyNet,
-    DTConfig,
-    GoalConditionedDT,
-    _cpu_keep_scale,
-    add_dropout,
-    dropout,
-    state_columns,
-)
+from gcdt.fast_forward import _cpu_keep_scale, add_dropout, dropout
+from gcdt.models import BCConfig, BCPolicyNet, DTConfig, GoalConditionedDT, state_columns
 
 
 def _inputs(b=3, k=6, d=24, a=3, seed=0):
@@ -30,10 +25,17 @@ def _inputs(b=3, k=6, d=24, a=3, seed=0):
     }
 
 
-@pytest.fixture
-def model():
+@pytest.fixture(params=[True, False], ids=["fast", "reference"])
+def model(request):
     torch.manual_seed(0)
-    return GoalConditionedDT(DTConfig(state_dim=24, action_dim=3, context=6)).eval()
+    return GoalConditionedDT(DTConfig(state_dim=24, action_dim=3, context=6), request.param).eval()
+
+
+def _reference(net: GoalConditionedDT) -> GoalConditionedDT:
+    """`net`'s weights and mode, on the reference path of `gcdt.models`."""
+    ref = GoalConditionedDT(net.cfg, fast=False).train(net.training)
+    ref.load_state_dict(net.state_dict())
+    return ref
 
 
 def test_shapes_and_range(model):
@@ -87,13 +89,32 @@ def test_goal_conditioning_columns_and_bad_config():
         DTConfig(state_dim=6, action_dim=3, context=0)
 
 
-def test_attention_weights_match_the_fast_path(model):
+def test_state_dict_keys_are_those_of_checkpoints_and_the_hf_parity_test(model):
+    def linear(name):
+        return [f"{name}.weight", f"{name}.bias"]
+
+    parts = ("ln_1", "qkv", "proj", "ln_2", "fc", "fc_proj")
+    expected = [
+        "embed_timestep.weight",
+        *(
+            key
+            for m in ("embed_return", "embed_state", "embed_action", "embed_ln")
+            for key in linear(m)
+        ),
+        *(key for i in range(3) for m in parts for key in linear(f"blocks.{i}.{m}")),
+        *linear("ln_f"),
+        *linear("predict_action"),
+    ]
+    assert list(model.state_dict()) == expected
+
+
+def test_attention_weights_come_from_the_reference_path_and_match_the_fast_path(model):
     inputs = _inputs()
     inputs["mask"][0, :2] = False  # a left-padded window
     attention: list[torch.Tensor] = []
     with torch.no_grad():
         fast = model(**inputs)
-        spelt_out = model(**inputs, attention=attention)
+        spelt_out = model(**inputs, attention=attention)  # the reference path, on either model
     torch.testing.assert_close(spelt_out, fast, atol=1e-5, rtol=1e-5)
     assert len(attention) == 3 and attention[0].shape == (3, 1, 18, 18)
     torch.testing.assert_close(attention[0].sum(-1), torch.ones(3, 1, 18))
@@ -105,35 +126,40 @@ def test_only_the_requested_state_tokens_are_computed(model):
     inputs = _inputs()
     inputs["mask"][1, :3] = False
     with torch.no_grad():
-        full = model(**inputs, attention=[])  # every token computed
-        pruned = model(**inputs)  # the last block evaluates state tokens only
+        full = _reference(model)(**inputs)  # every token computed
+        pruned = model(**inputs)  # fast: the last block evaluates state tokens only
         last = model(**inputs, steps=slice(-1, None))
+        last_reference = _reference(model)(**inputs, steps=slice(-1, None))
     torch.testing.assert_close(pruned, full, atol=1e-5, rtol=1e-5)
-    assert last.shape == (3, 1, 3)
+    assert last.shape == last_reference.shape == (3, 1, 3)
     torch.testing.assert_close(last, full[:, -1:], atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(last_reference, full[:, -1:], atol=1e-5, rtol=1e-5)
 
 
-def test_padding_rows_are_skipped_without_changing_the_training_gradient(monkeypatch):
-    """On CPU the blocks skip the padding's rows; on a GPU they compute them (as here with
-    `_packs` off); the inspector path computes every token. With dropout 0 the masked loss
-    and its gradients must agree, and padded outputs are zeros on every path."""
-    import gcdt.models as models
-
+@pytest.mark.parametrize("heads", [1, 2])
+@pytest.mark.parametrize("train", [True, False], ids=["train", "eval"])
+def test_fast_path_equals_the_reference_outputs_and_gradients(monkeypatch, heads, train):
+    """The seam's contract, dropout off. On CPU the fast path skips the padding's rows (and
+    in training spells attention out); on a GPU it computes them (as here with `_packs` off);
+    the reference path computes every token. The masked loss and its gradients must agree,
+    and padded outputs are zeros on every path."""
     torch.manual_seed(0)
-    net = GoalConditionedDT(DTConfig(state_dim=24, action_dim=3, context=6, dropout=0.0))
-    net.train()
+    cfg = DTConfig(state_dim=24, action_dim=3, context=6, heads=heads, dropout=0.0)
+    net = GoalConditionedDT(cfg).train(train)
+    reference = _reference(net)
     inputs = _inputs(b=4)
     inputs["mask"][0, :2] = False
     inputs["mask"][2, :5] = False  # one real step
     mask = inputs["mask"]
     results = []
-    for path in ("packed", "unpacked", "inspector"):
+    for path in ("packed", "unpacked", "reference"):
         if path == "unpacked":
-            monkeypatch.setattr(models, "_packs", lambda real: False)
-        net.zero_grad()
-        out = net(**inputs, attention=[] if path == "inspector" else None)
+            monkeypatch.setattr(fast_forward, "_packs", lambda real: False)
+        model = reference if path == "reference" else net
+        model.zero_grad()
+        out = model(**inputs)
         torch.mean((out - inputs["actions"])[mask] ** 2).backward()
-        grads = {n: p.grad.clone() for n, p in net.named_parameters() if p.grad is not None}
+        grads = {n: p.grad.clone() for n, p in model.named_parameters() if p.grad is not None}
         results.append((out.detach(), grads))
         monkeypatch.undo()
     packed, g_packed = results[0]

@@ -7,9 +7,10 @@ import os
 import pytest
 import torch
 
+from gcdt.checkpoint import save_checkpoint
 from gcdt.errors import GcdtError
 from gcdt.paths import atomic_write, check_writable, write_if_changed, write_json_atomic
-from gcdt.training import _write_log, save_checkpoint
+from gcdt.training import _write_log
 
 
 class _Unpicklable:

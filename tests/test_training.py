@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 import torch
 
+from gcdt.checkpoint import load_checkpoint
 from gcdt.cli import main
 from gcdt.data import collect
 from gcdt.errors import GcdtError
 from gcdt.evaluation import evaluate
 from gcdt.policies import ScriptedExpert, make_policy
 from gcdt.policies.trained import TrainedPolicy
-from gcdt.training import TrainConfig, WindowSampler, load_checkpoint, train
+from gcdt.training import TrainConfig, WindowSampler, train
 
 FAST = {"log_every": 10, "checkpoint_every": 10}
 

@@ -31,7 +31,10 @@ from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_
 CONFIG_FILE = Path(__file__).with_name("tqc_her.yaml")
 #: Values a config other than `paper`, or a profile, may change: the compute budget only.
 BUDGET_KEYS = ("steps", "net_arch", "batch_size", "buffer_size", "learning_starts")
-RUN_FILES = ("model.zip", "best_model.zip", "eval.csv", "run.json")
+#: A run's files: the last and the best model, the learning curve, and the record written last.
+MODEL_ZIP, BEST_MODEL_ZIP = "model.zip", "best_model.zip"
+EVAL_CSV, RUN_JSON = "eval.csv", "run.json"
+RUN_FILES = (MODEL_ZIP, BEST_MODEL_ZIP, EVAL_CSV, RUN_JSON)
 EVAL_FIELDS = (
     "env_steps",
     "train_seconds",
@@ -235,13 +238,13 @@ def train_tqc(
     if evaluator.last_step != model.num_timesteps:
         evaluator.run()  # the final policy is always measured
     wall = time.perf_counter() - started
-    _save_zip(model, out / "model.zip")
+    _save_zip(model, out / MODEL_ZIP)
     model.get_env().close()
     train_seconds = wall - evaluator.seconds
     result = TQCResult(
         out_dir=out,
-        model=out / "model.zip",
-        best_model=out / "best_model.zip",
+        model=out / MODEL_ZIP,
+        best_model=out / BEST_MODEL_ZIP,
         env_steps=int(model.num_timesteps),
         train_seconds=train_seconds,
         wall_seconds=wall,
@@ -250,7 +253,7 @@ def train_tqc(
         final_success_rate=evaluator.rows[-1]["success_rate"] if evaluator.rows else None,
     )
     write_json_atomic(
-        out / "run.json",
+        out / RUN_JSON,
         {
             "task": spec.name,
             "reward": reward,
@@ -306,7 +309,7 @@ class _PeriodicEvaluation:
         self.last_step = -1
         self.started = time.perf_counter()
         self.learning_mark: tuple[int, float, float] | None = None  # (step, clock, eval s)
-        with open(out / "eval.csv", "w", newline="") as f:
+        with open(out / EVAL_CSV, "w", newline="") as f:
             csv.writer(f).writerow(EVAL_FIELDS)
 
     def run(self) -> None:
@@ -329,12 +332,12 @@ class _PeriodicEvaluation:
         }
         self.rows.append(row)
         self.last_step = row["env_steps"]
-        with open(self.out / "eval.csv", "a", newline="") as f:
+        with open(self.out / EVAL_CSV, "a", newline="") as f:
             csv.DictWriter(f, EVAL_FIELDS).writerow(row)
         score = (row["success_rate"], row["mean_return"])
         if score > self.best:
             self.best, self.best_row = score, row
-            _save_zip(self.model, self.out / "best_model.zip")
+            _save_zip(self.model, self.out / BEST_MODEL_ZIP)
         self.seconds += time.perf_counter() - began
 
     def mark_learning_start(self) -> None:

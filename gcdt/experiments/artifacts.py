@@ -20,6 +20,14 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from gcdt.baselines.tqc_her import (
+    EVAL_CSV,
+    MODEL_ZIP,
+    RUN_FILES,
+    RUN_JSON,
+    load_tqc_config,
+    train_tqc,
+)
 from gcdt.data import Dataset, collect, load_dataset, mix, subset
 from gcdt.experiments.grid import OFFLINE_METHODS, DataSpec, RunSpec, TQCSpec
 from gcdt.paths import artifacts_dir
@@ -47,13 +55,11 @@ def _locked(key: str) -> Iterator[None]:
 
 def tqc_agent(spec: TQCSpec) -> Path:
     """The final model zip of TQC+HER run `spec`, trained first if it does not exist yet."""
-    from gcdt.baselines.tqc_her import load_tqc_config, train_tqc
-
     out = grid_dir() / "tqc" / spec.key()
-    model = out / "model.zip"
+    model = out / MODEL_ZIP
     with _locked(spec.key()):
-        if not (out / "run.json").exists():  # run.json is written last: the run finished
-            for name in ("model.zip", "best_model.zip", "eval.csv"):  # an interrupted run
+        if not (out / RUN_JSON).exists():  # written last: without it the run did not finish
+            for name in RUN_FILES:  # what an interrupted run left
                 (out / name).unlink(missing_ok=True)
             cfg = load_tqc_config(spec.config, spec.task)
             changes = dict(spec.budget)
@@ -123,7 +129,7 @@ def _collect(spec: DataSpec) -> Dataset:
 
 def tqc_curve(run_dir: Path, fields: tuple[str, ...]) -> list[dict[str, float]]:
     """The learning curve (`eval.csv`) of a finished TQC+HER run, `fields` of each point."""
-    with open(run_dir / "eval.csv", newline="") as f:
+    with open(run_dir / EVAL_CSV, newline="") as f:
         return [{k: float(row[k]) for k in fields} for row in csv.DictReader(f)]
 
 
@@ -135,7 +141,8 @@ def checkpoint_dir(spec: RunSpec) -> Path:
 def checkpoint(spec: RunSpec) -> Path:
     """The finished training checkpoint of offline run `spec`: trained first if it does not
     exist yet, resumed if an earlier training was interrupted."""
-    from gcdt.training import CHECKPOINT_NAME, TrainConfig, load_checkpoint, train
+    from gcdt.checkpoint import CHECKPOINT_NAME, load_checkpoint
+    from gcdt.training import TrainConfig, train
 
     out = checkpoint_dir(spec)
     path = out / CHECKPOINT_NAME

@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass, field
 from statistics import median
 
-from gcdt.experiments.grid import RunSpec
+from gcdt.experiments.grid import OFFLINE_METHODS, RunSpec
 from gcdt.paths import REPO_ROOT
 
 #: Reference-machine rates (seconds per unit), used when neither results/bench/ nor finished
@@ -31,7 +31,8 @@ DEFAULT_RATES = {
 }
 #: Mean episode length assumed to turn transitions into the authors' epochs.
 ASSUMED_EPISODE_LENGTH = 30
-PAPER_EPOCHS = 120
+#: The grid's methods that train a Decision Transformer (their steps and their acting cost more).
+DT_METHODS = tuple(name for name, (method, _) in OFFLINE_METHODS.items() if method == "dt")
 
 
 @dataclass
@@ -80,8 +81,7 @@ class CostModel:
         """Seconds for `spec` alone (shared datasets and TQC experts are counted apart)."""
         r = self.rates
         seconds = r["run_overhead"]
-        is_dt = spec.method in ("gcdt", "dt", "dt-desired")
-        eval_rate = r["dt_eval_step" if is_dt else "eval_step"]
+        eval_rate = r["dt_eval_step" if spec.method in DT_METHODS else "eval_step"]
         seconds += spec.eval_timesteps * len(spec.eval_seeds) * eval_rate
         if spec.method == "tqc":
             rate = r.get(f"tqc_step:{spec.tqc.config}", r["tqc_step:paper"])
@@ -93,11 +93,12 @@ class CostModel:
 
 
 def offline_steps(spec: RunSpec) -> int:
-    """Gradient steps of an offline run (the authors' epochs estimated from the data size)."""
-    if spec.train_steps is not None:
-        return spec.train_steps
+    """Gradient steps of an offline run: its budget, else the trainer's default (the authors'
+    epochs) for the data size in episodes of `ASSUMED_EPISODE_LENGTH`."""
+    from gcdt.training import TrainConfig  # imports torch: only once costs are estimated
+
     episodes = math.ceil(spec.data.size / ASSUMED_EPISODE_LENGTH)
-    return PAPER_EPOCHS * math.ceil(episodes / 64)
+    return TrainConfig(steps=spec.train_steps).total_steps(episodes)
 
 
 def _samples(result: dict, samples: dict[str, list[float]]) -> None:
@@ -109,5 +110,5 @@ def _samples(result: dict, samples: dict[str, list[float]]) -> None:
         samples.setdefault(name, []).append(seconds["train_seconds"] / steps)
     evaluated = spec["eval_timesteps"] * len(spec["eval_seeds"])
     if seconds.get("evaluate_seconds") and evaluated >= 1000:
-        name = "dt_eval_step" if spec["method"] in ("gcdt", "dt", "dt-desired") else "eval_step"
+        name = "dt_eval_step" if spec["method"] in DT_METHODS else "eval_step"
         samples.setdefault(name, []).append(seconds["evaluate_seconds"] / evaluated)

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from gcdt.baselines.tqc_her import RUN_JSON
 from gcdt.experiments import artifacts
 from gcdt.experiments.grid import RUN_SCHEMA, RunSpec
 from gcdt.experiments.store import RunStore
@@ -82,7 +83,7 @@ def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict
 
         model = artifacts.tqc_agent(spec.tqc)
         timings["train_seconds"] = round(time.perf_counter() - began, 3)
-        run = json.loads((model.parent / "run.json").read_text())
+        run = json.loads((model.parent / RUN_JSON).read_text())
         trained = {
             "env_steps": run["env_steps"],
             "overrides": run["overrides"],
@@ -91,8 +92,8 @@ def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict
         }
         return TQCPolicy(model, spec.task), trained
 
+    from gcdt.checkpoint import load_checkpoint
     from gcdt.policies.trained import TrainedPolicy
-    from gcdt.training import load_checkpoint
 
     data = artifacts.dataset(spec.data)
     timings["data_seconds"] = round(time.perf_counter() - began, 3)

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from gcdt.baselines.tqc_her import RUN_JSON, load_tqc_config
 from gcdt.errors import GcdtError
 from gcdt.experiments.costs import CostModel
 from gcdt.experiments.grid import GridEntry, build_grid
@@ -122,9 +123,7 @@ def shared_cost(todo: list[PlannedRun], costs: CostModel | None = None) -> float
         if not (grid_dir() / "datasets" / f"{k}.npz").exists()
     )
     for key, spec in experts.items():
-        if not (grid_dir() / "tqc" / key / "run.json").exists():
-            from gcdt.baselines.tqc_her import load_tqc_config
-
+        if not (grid_dir() / "tqc" / key / RUN_JSON).exists():
             steps = spec.steps or load_tqc_config(spec.config, spec.task).steps
             seconds += steps * costs.rates.get(f"tqc_step:{spec.config}", 1.0)
     return seconds

@@ -19,7 +19,7 @@ help:
 	@echo "make lint       ruff over gcdt/, tests/, benchmarks/ and scripts/"
 	@echo "make bench      throughput benchmarks -> results/bench/*.json, docs/benchmarks.md"
 	@echo "make bench-tqc  TQC+HER trained on Reach to success -> results/bench/tqc_her_reach.json"
-	@echo "make reproduce  PROFILE=smoke|quick|paper (default quick, ~1 h on 2 cores) [BACKEND=local|ray]:"
+	@echo "make reproduce  PROFILE=smoke|quick|paper (default quick, ~45 min on 2 cores) [BACKEND=local|ray]:"
 	@echo "                re-run the grid and every notebook into $(REPRO_DIR)/, then check"
 	@echo "                the results against the published ones (results/PROFILE/)"
 	@echo "make publish    (maintainers) make that reproduction the published results/ and figures/"
@@ -40,7 +40,7 @@ $(STAMP): environment/requirements.txt pyproject.toml
 	@touch $@
 
 test: install
-	@echo "make test: the suite, then every notebook (nbval); about 15-20 min on 2 cores"
+	@echo "make test: the suite, then every notebook (nbval); about 4 min on 2 cores"
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 lint: install

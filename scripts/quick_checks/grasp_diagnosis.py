@@ -17,37 +17,39 @@ from pathlib import Path
 
 import numpy as np
 
-from gcdt.envs import episode_seed, make_env
 from gcdt.policies.scripted import GRASP_WIDTH, MISSED_WIDTH
 from gcdt.policies.trained import TrainedPolicy
+from gcdt.rollout import VectorRollout
 
 SEED = 5000
 
 
 def diagnose(checkpoint: str, target_return: float, episodes: int) -> dict:
     policy = TrainedPolicy(checkpoint, "pick_and_place", target_return=target_return)
-    env = make_env("pick_and_place", "sparse")
     counts = {"success": 0, "failed_never_held": 0, "failed_after_holding": 0}
     closed_far = 0
-    for j in range(episodes):
-        policy.reset(1, SEED + j)
-        obs, _ = env.reset(seed=episode_seed(SEED, j))
-        start, reward = np.ones(1, bool), np.zeros(1, np.float32)
-        held = success = False
-        for _ in range(50):
-            o = obs["observation"]
-            action = policy.predict({k: v[None] for k, v in obs.items()}, start, reward)[0]
-            closed_far += int(action[3] < 0 and np.linalg.norm(o[7:10] - o[:3]) > 0.03)
-            obs, r, terminated, truncated, _ = env.step(action)
-            o = obs["observation"]
-            near = np.linalg.norm(o[7:10] - o[:3]) < 0.02
-            held |= bool(near and MISSED_WIDTH < o[6] < GRASP_WIDTH)
-            start[:], reward[:] = False, r
-            if terminated or truncated:
-                success = bool(terminated)
-                break
-        key = "success" if success else ("failed_after_holding" if held else "failed_never_held")
-        counts[key] += 1
+    held = False
+    # The project's one stepping loop, on one env: episode j starts from episode_seed(SEED, j).
+    with VectorRollout(policy, "pick_and_place", "sparse", n_envs=1, seed=SEED) as rollout:
+        while sum(counts.values()) < episodes:
+            step = rollout.step()
+            before, after, action = (
+                step.obs["observation"][0],
+                step.next_obs["observation"][0],
+                step.action[0],
+            )
+            closed_far += int(action[3] < 0 and np.linalg.norm(before[7:10] - before[:3]) > 0.03)
+            near = np.linalg.norm(after[7:10] - after[:3]) < 0.02
+            held |= bool(near and MISSED_WIDTH < after[6] < GRASP_WIDTH)
+            if step.done[0]:
+                success = bool(step.terminated[0])
+                key = (
+                    "success"
+                    if success
+                    else ("failed_after_holding" if held else "failed_never_held")
+                )
+                counts[key] += 1
+                held = False
     return {
         "command": "python " + " ".join(sys.argv),
         "checkpoint": checkpoint,

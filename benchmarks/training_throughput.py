@@ -10,7 +10,7 @@ training step (forward, masked MSE, backward, clip 0.25, AdamW) of the paper's c
 * the authors' path: HuggingFace `transformers.DecisionTransformerModel` (the same config,
   ReLU, tanh actions) with the masked-MSE loss of their trainer and torch's AdamW (the HF
   Trainer's `adamw_torch`). Optional: the cell is skipped, and said so, when `transformers`
-  is not installed (`make bench` installs it).
+  is not installed (environment/requirements.txt pins it).
 Both step on the very same batches, drawn beforehand by gcdt's sampler, whose own cost is
 reported as its share of gcdt's step. Data: a PickAndPlace-shaped dataset of 1,000 50-step
 episodes (19 % of a window's tokens are left padding), and for the `*_short` cells one of

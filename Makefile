@@ -8,7 +8,7 @@ PYTEST_ARGS ?=
 PROFILE ?= quick
 BACKEND ?= local
 # A reproduction's own results and figures: never the published results/ and figures/.
-REPRO_DIR ?= $(or $(GCDT_ARTIFACTS),artifacts)/reproduce
+REPRO_DIR ?= $(or $(GCDT_OUTPUTS),$(or $(GCDT_ARTIFACTS),artifacts)/reproduce)
 NOTEBOOKS := $(sort $(wildcard notebooks/[0-9]*.ipynb))
 
 .PHONY: install test lint bench bench-tqc reproduce publish figures lab clean help

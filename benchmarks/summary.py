@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 
 from common import BENCH_DIR
 
-from gcdt.paths import REPO_ROOT
+from gcdt.paths import REPO_ROOT, write_between_markers
 
 START, END = "<!-- bench:start -->", "<!-- bench:end -->"
 TASKS = ("reach", "push", "pick_and_place")
@@ -442,14 +441,7 @@ def main() -> None:
     if not args.docs:
         print(text)
         return
-    page = REPO_ROOT / "docs" / "benchmarks.md"
-    old = page.read_text()
-    if START not in old or END not in old:
-        raise SystemExit(f"{page} lacks the markers {START} ... {END}")
-    block = f"{START}\n{text}\n{END}"
-    page.write_text(
-        re.sub(re.escape(START) + ".*?" + re.escape(END), lambda _: block, old, flags=re.S)
-    )
+    write_between_markers(REPO_ROOT / "docs" / "benchmarks.md", START, END, text)
 
 
 if __name__ == "__main__":

@@ -509,7 +509,8 @@ def _sweep_parser(sub: argparse._SubParsersAction) -> None:
         "sweep",
         help="run the experiment grid of a profile (skips finished runs)",
         description="Run every run of a profile's grid whose result is not in "
-        "results/PROFILE/runs/ yet; failed and untrusted results are run again.",
+        "results/PROFILE/runs/ yet (under $GCDT_OUTPUTS when set, else the repository's); "
+        "failed and untrusted results are run again.",
     )
     sw.add_argument("--profile", required=True, choices=list(PROFILES))
     sw.add_argument("--backend", default="local", choices=list(BACKENDS))
@@ -530,6 +531,11 @@ def _sweep(args: argparse.Namespace) -> int:
     from gcdt.experiments.sweep import default_workers, shared_cost
 
     profile = get_profile(args.profile)
+    if not args.dry_run:  # before hours of runs, not after the first one
+        from gcdt.paths import artifacts_dir, check_writable
+
+        check_writable(results_dir(profile.name) / "runs", folder=True, option="results folder")
+        check_writable(artifacts_dir(), folder=True, option="artifacts folder (GCDT_ARTIFACTS)")
     if args.dry_run:
         costs = CostModel.measured()  # reads the bench JSON and every result file: once
         store = RunStore(results_dir(profile.name) / "runs")
@@ -567,8 +573,9 @@ def _report_parser(sub: argparse._SubParsersAction) -> None:
     rp = sub.add_parser(
         "report",
         help="tables and figures of the paper from results/PROFILE/runs/",
-        description="Write Table 1 and the ablation table (CSV, Markdown, LaTeX) and Fig. 3 "
-        "and 4 (PNG, PDF) from a profile's finished runs.",
+        description="Write Table 1 and the ablation table (CSV, Markdown, LaTeX), Fig. 2-4 "
+        "and the learning curves (PNG, PDF) from a profile's finished runs (results/ and "
+        "figures/ under $GCDT_OUTPUTS when set, else the repository's).",
     )
     rp.add_argument("--profile", required=True, choices=list(PROFILES))
     rp.add_argument("--readme", action="store_true", help="also update README.md's results")
@@ -609,11 +616,9 @@ def _report_cmd(args: argparse.Namespace) -> int:
 
 def _reproduction_dir(given: Path | None) -> Path:
     """A reproduction's folder: the one given, else $GCDT_OUTPUTS, else artifacts/reproduce."""
-    import os
+    from gcdt.paths import reproduction_root
 
-    from gcdt.paths import OUTPUTS_ENV, artifacts_dir
-
-    folder = given or Path(os.environ.get(OUTPUTS_ENV) or artifacts_dir() / "reproduce")
+    folder = given or reproduction_root()
     if not folder.is_dir():
         raise GcdtError(f"{folder} does not exist: run `make reproduce` first, or give its folder")
     return folder
@@ -673,10 +678,12 @@ def _publish(args: argparse.Namespace) -> int:
     from gcdt.paths import REPO_ROOT
     from gcdt.report.reproduction import publish
 
-    written = publish(get_profile(args.profile), _reproduction_dir(args.source))
+    written, removed = publish(get_profile(args.profile), _reproduction_dir(args.source))
     for path in written:
         print(path.relative_to(REPO_ROOT))
-    print(f"published {args.profile}: {len(written)} file(s) changed")
+    for path in removed:
+        print(f"removed {path.relative_to(REPO_ROOT)}")
+    print(f"published {args.profile}: {len(written)} file(s) written, {len(removed)} removed")
     return 0
 
 

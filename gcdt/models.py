@@ -21,7 +21,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, get_args
 
 import torch
 import torch.nn.functional as F
@@ -32,7 +32,7 @@ from gcdt.envs import get_task
 from gcdt.errors import GcdtError
 
 GoalConditioning = Literal["desired+achieved", "desired", "none"]
-GOAL_CONDITIONINGS: tuple[str, ...] = ("desired+achieved", "desired", "none")
+GOAL_CONDITIONINGS: tuple[str, ...] = get_args(GoalConditioning)
 
 
 def state_columns(task: str, goal_conditioning: str) -> slice:

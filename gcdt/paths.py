@@ -31,9 +31,22 @@ OUTPUTS_ENV = "GCDT_OUTPUTS"
 
 def outputs_root() -> Path:
     """The folder holding `results/<profile>/` and `figures/<profile>/`: `$GCDT_OUTPUTS`, else
-    the repository (the published results). Absolute, so that workers with another working
-    directory (Ray) write to the same place."""
-    return Path(os.environ.get(OUTPUTS_ENV) or REPO_ROOT).resolve()
+    the repository (the published results). A relative `$GCDT_OUTPUTS` is taken from the
+    repository's root, so notebooks (run in notebooks/) and Ray workers find the same folder."""
+    return (REPO_ROOT / (os.environ.get(OUTPUTS_ENV) or ".")).resolve()
+
+
+def is_published(root: str | Path | None = None) -> bool:
+    """Whether `root` (default `outputs_root()`) is the repository's published results."""
+    return Path(root or outputs_root()).resolve() == REPO_ROOT.resolve()
+
+
+def reproduction_root() -> Path:
+    """A reproduction's own folder: `$GCDT_OUTPUTS`, else `<artifacts>/reproduce` (what
+    `make reproduce` fills by default)."""
+    if os.environ.get(OUTPUTS_ENV):
+        return outputs_root()
+    return (REPO_ROOT / artifacts_dir() / "reproduce").resolve()
 
 
 def results_dir(profile: str, root: str | Path | None = None) -> Path:
@@ -155,3 +168,17 @@ def _why(path: Path) -> str:
     except (OSError, AttributeError):  # statvfs is POSIX-only
         return "permission denied"
     return f"permission denied, mode {mode}"
+
+
+def write_between_markers(path: str | Path, start: str, end: str, text: str) -> bool:
+    """Replace what lies between the markers `start` and `end` in the text file `path` with
+    `text` (written only if that changes the file); whether it wrote."""
+    import re
+
+    path = Path(path)
+    old = path.read_text()
+    if start not in old or end not in old:
+        raise GcdtError(f"{path} lacks the markers {start} ... {end}")
+    block = f"{start}\n{text}\n{end}"
+    pattern = re.escape(start) + ".*?" + re.escape(end)
+    return write_if_changed(path, re.sub(pattern, lambda _: block, old, flags=re.S))

@@ -122,10 +122,19 @@ class TrainConfig:
             if not isinstance(value, int) or value < minimum:
                 wanted = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
                 raise GcdtError(f"{f.name} must be {wanted}, got {value!r}")
-        if not self.lr > 0:
-            raise GcdtError(f"lr must be > 0, got {self.lr!r}")
-        if isinstance(self.checkpoint_seconds, bool) or not self.checkpoint_seconds > 0:
-            raise GcdtError(f"checkpoint_seconds must be > 0, got {self.checkpoint_seconds!r}")
+        # Real-valued settings and their ranges; NaN fails every comparison, so it is refused.
+        for name, ok, wanted in (
+            ("lr", lambda v: v > 0, "> 0"),
+            ("weight_decay", lambda v: v >= 0, ">= 0"),
+            ("warmup_fraction", lambda v: 0 <= v <= 1, "in [0, 1]"),
+            ("grad_clip", lambda v: v > 0, "> 0"),
+            ("return_scale", lambda v: v > 0, "> 0"),
+            ("dropout", lambda v: 0 <= v < 1, "in [0, 1)"),
+            ("checkpoint_seconds", lambda v: v > 0, "> 0"),
+        ):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not ok(value):
+                raise GcdtError(f"{name} must be {wanted}, got {value!r}")
 
     def total_steps(self, n_episodes: int) -> int:
         if self.steps is not None:

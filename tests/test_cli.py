@@ -499,3 +499,10 @@ def test_dataset_info_on_a_non_dataset_never_suggests_unpickling(
     expected = f"gcdt: error: {path} is not a gcdt dataset (.npz archive written by gcdt collect): "
     assert err[0].startswith(expected), err[0]
     assert reason in err[0] and "pickle" not in err[0].lower(), err[0]
+
+
+def test_sweep_checks_its_results_folder_before_any_run(assert_usage_error, tmp_path, monkeypatch):
+    (tmp_path / "file.txt").write_text("x")
+    monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path / "file.txt"))
+    assert_usage_error(["sweep", "--profile", "smoke"], "choose another results folder")
+    assert [p.name for p in tmp_path.iterdir()] == ["file.txt"]

@@ -99,15 +99,29 @@ def test_publish_mirrors_a_finished_run_and_refuses_an_unfinished_one(published_
     published, ours = published_and_ours
     stale = results_dir(PROFILE.name, published) / "runs" / "0000000000000000.json"
     stale.write_text("{}")
+    kept = results_dir(PROFILE.name, published) / ".gitkeep"  # hidden: never mirrored
+    kept.write_text("")
     (figures_dir(PROFILE.name, ours)).mkdir(parents=True)
     (figures_dir(PROFILE.name, ours) / "a.png").write_bytes(b"png")
+    checkpoints = figures_dir(PROFILE.name, ours) / ".ipynb_checkpoints"
+    checkpoints.mkdir()
+    (checkpoints / "b.png").write_bytes(b"")
     unchanged = next((results_dir(PROFILE.name, published) / "runs").glob("[1-9a-f]*.json"))
     os.utime(unchanged, (1, 1))
     _shift_one_run(ours, "gcdt", "reach", by=-0.1)
-    written = reproduction.publish(PROFILE, ours, published)
-    assert not stale.exists() and unchanged.stat().st_mtime == 1  # identical: untouched
+    with pytest.raises(GcdtError, match=r"holds no reproduce\.json: only a finished"):
+        reproduction.publish(PROFILE, ours, published)  # runs done, notebooks never ran
+    (results_dir(PROFILE.name, ours) / "reproduce.json").write_text("{}")
+    written, removed = reproduction.publish(PROFILE, ours, published)
+    assert removed == [stale] and kept.exists()
+    assert unchanged.stat().st_mtime == 1  # identical: untouched
     assert (figures_dir(PROFILE.name, published) / "a.png").read_bytes() == b"png"
-    assert {p.suffix for p in written} == {".json", ".png"} and len(written) == 2
+    assert not (figures_dir(PROFILE.name, published) / ".ipynb_checkpoints").exists()
+    shifted = [p for p in written if p.parent.name == "runs"]  # the one changed run
+    assert len(shifted) == 1 and {p.name for p in written} - {shifted[0].name} == {
+        "a.png",
+        "reproduce.json",
+    }
     check = reproduction.reproduction_check(_runs(published), _runs(ours))
     assert check["agrees"].all()
     next((results_dir(PROFILE.name, ours) / "runs").glob("*.json")).unlink()
@@ -184,3 +198,27 @@ def test_notebooks_and_report_render_from_results_with_the_artifacts_deleted(tmp
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+def test_notebooks_over_published_results_run_nothing_and_write_nothing_there(
+    tmp_path, monkeypatch, capsys
+):
+    """JupyterLab over the published quick results: the sweep cell runs nothing, and a drawn
+    figure goes to the artifacts, never into figures/quick/ (only make publish writes there)."""
+    from gcdt import report
+
+    monkeypatch.delenv(OUTPUTS_ENV, raising=False)
+    monkeypatch.setenv(ARTIFACTS_ENV, str(tmp_path))
+    sweeps = sys.modules["gcdt.experiments.sweep"]  # the module (the package exports a function)
+    monkeypatch.setattr(sweeps, "sweep", lambda *a, **k: pytest.fail("a sweep ran"))
+    quick = get_profile("quick")
+    assert report.renders_published(quick) and not report.renders_published(get_profile("smoke"))
+    report.run_grid(quick, "local")
+    assert "rendering the published quick results" in capsys.readouterr().out
+    fig, ax = plt.subplots()
+    ax.plot([0, 1])
+    report.show(fig, quick, "scratch_figure")
+    assert (tmp_path / "notebooks" / "quick" / "scratch_figure.png").exists()
+    assert not (figures_dir("quick", REPO_ROOT) / "scratch_figure.png").exists()
+    report.show(None, quick, "fig9")
+    assert "fig9: profile quick has no runs for this figure" in capsys.readouterr().out

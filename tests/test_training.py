@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -306,3 +307,20 @@ def test_unknown_or_missing_device_fails_before_anything_is_written(make_dataset
     with pytest.raises(GcdtError, match="this torch sees no CUDA GPU; use cpu or auto"):
         train(ds, TrainConfig(steps=2, device="cuda"), tmp_path / "b", progress=False)  # conftest
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "wanted"),
+    [
+        ("dropout", 1.0, "in [0, 1)"),
+        ("dropout", -0.1, "in [0, 1)"),
+        ("return_scale", 0.0, "> 0"),
+        ("grad_clip", -1.0, "> 0"),
+        ("warmup_fraction", 1.5, "in [0, 1]"),
+        ("weight_decay", -1e-4, ">= 0"),
+        ("lr", float("nan"), "> 0"),
+    ],
+)
+def test_real_valued_settings_out_of_range_are_refused(field, value, wanted):
+    with pytest.raises(GcdtError, match=re.escape(f"{field} must be {wanted}, got {value!r}")):
+        TrainConfig(**{field: value})

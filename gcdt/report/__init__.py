@@ -1,9 +1,11 @@
 """Tables and figures of the paper from `results/<profile>/` alone: `gcdt report`.
 
 write_report(profile) writes Table 1 and the ablation table (CSV, Markdown, LaTeX) into
-results/<profile>/, Fig. 3 and Fig. 4 (PNG, PDF) into figures/<profile>/, and
-results/<profile>/report.md, which also lists the profile's deviations from the paper.
-`make reproduce` adds results/<profile>/reproduce.json: its measured wall time.
+results/<profile>/, Fig. 2-4 and the learning curves (PNG, PDF) into figures/<profile>/, and
+results/<profile>/report.md, which also lists the profile's deviations from the paper; both
+folders lie under `gcdt.paths.outputs_root()` (the repository, or a reproduction's own).
+`make reproduce` adds results/<profile>/reproduce.json: its measured wall time. The notebooks'
+helpers (`show`, `run_grid`) are here too.
 """
 
 from __future__ import annotations
@@ -13,7 +15,17 @@ from pathlib import Path
 
 from gcdt.errors import GcdtError
 from gcdt.experiments.profiles import PROFILES, Profile, deviations_text
-from gcdt.paths import results_dir, write_if_changed, write_json_atomic
+from gcdt.paths import (
+    OUTPUTS_ENV,
+    REPO_ROOT,
+    artifacts_dir,
+    is_published,
+    outputs_root,
+    results_dir,
+    write_between_markers,
+    write_if_changed,
+    write_json_atomic,
+)
 from gcdt.report import figures, tables
 
 README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
@@ -34,15 +46,63 @@ def check_parameters(profile: object, backend: object) -> Profile:
     return PROFILES[profile]
 
 
+def renders_published(profile: Profile) -> bool:
+    """Whether a notebook reads the repository's published results of `profile` (JupyterLab
+    without `$GCDT_OUTPUTS`): it then renders them and never runs or rewrites anything there;
+    `make reproduce` is what re-runs. The smoke profile publishes nothing, so it always runs."""
+    return is_published() and profile.name != "smoke"
+
+
 def outputs_note(profile: Profile) -> str:
     """Which results a notebook reads and writes: the published ones, or a reproduction's."""
-    from gcdt.paths import OUTPUTS_ENV, REPO_ROOT, outputs_root
-
     where = results_dir(profile.name)
     shown = where.relative_to(REPO_ROOT) if where.is_relative_to(REPO_ROOT) else where
-    if outputs_root() == REPO_ROOT:
-        return f"Results: {shown}/ (the repository's published results)"
+    if renders_published(profile):
+        return (
+            f"Results: {shown}/ (the repository's published results, rendered as they are; "
+            f"figures drawn here go to {notebook_figures_dir(profile)})"
+        )
+    if is_published():
+        return f"Results: {shown}/ (this checkout's own {profile.name} runs)"
     return f"Results: {shown}/ (this reproduction's own folder, ${OUTPUTS_ENV})"
+
+
+def notebook_figures_dir(profile: Profile) -> Path:
+    """Where a notebook saves what it draws: the results' figures folder, except over the
+    published results, whose figures only `make publish` and `make figures` write."""
+    if renders_published(profile):
+        return artifacts_dir() / "notebooks" / profile.name
+    return figures.figures_dir(profile.name)
+
+
+def show(fig, profile: Profile, name: str) -> None:
+    """Save `fig` as `name` (PNG, PDF) in `notebook_figures_dir` and display it once; a
+    figure that does not exist (None: no run of its section) is said so instead."""
+    from IPython.display import display
+
+    if fig is None:
+        print(f"{name}: profile {profile.name} has no runs for this figure")
+        return
+    figures.save(fig, notebook_figures_dir(profile), name)
+    display(fig)
+
+
+def run_grid(profile: Profile, backend: str, methods: tuple[str, ...] | None = None) -> None:
+    """A notebook's sweep: run what is not done yet, or nothing over the published results."""
+    from gcdt.experiments.sweep import sweep
+
+    if renders_published(profile):
+        print(
+            f"rendering the published {profile.name} results: `make reproduce "
+            f"PROFILE={profile.name}` re-runs them into a folder of your own"
+        )
+        return
+    summary = sweep(profile, backend=backend, methods=methods, progress=False)
+    print(summary.line())
+    if not summary.ok:
+        raise GcdtError(
+            f"{summary.line()}: see the failed result files in {results_dir(profile.name)}/runs"
+        )
 
 
 def write_tables(profile: Profile, runs) -> list[Path]:
@@ -172,22 +232,26 @@ def readme_block(profile: Profile) -> str:
 
 
 def update_readme(profile: Profile, readme: Path) -> None:
-    import re
-
-    text = readme.read_text()
-    if README_START not in text or README_END not in text:
-        raise GcdtError(f"{readme} lacks the markers {README_START} ... {README_END}")
-    block = f"{README_START}\n{readme_block(profile)}\n{README_END}"
-    pattern = re.escape(README_START) + ".*?" + re.escape(README_END)
-    readme.write_text(re.sub(pattern, lambda _: block, text, flags=re.S))
+    """README's results block regenerated from the published results (rewritten only if it
+    changes). Refused for a reproduction's own folder: the README shows published numbers."""
+    if not is_published():
+        raise GcdtError(
+            f"--readme shows the published results, but results are read from "
+            f"{outputs_root()} (${OUTPUTS_ENV}): unset {OUTPUTS_ENV}, or publish first"
+        )
+    write_between_markers(readme, README_START, README_END, readme_block(profile))
 
 
 __all__ = [
     "check_parameters",
     "figures",
+    "notebook_figures_dir",
     "outputs_note",
     "readme_block",
     "record_reproduction",
+    "renders_published",
+    "run_grid",
+    "show",
     "tables",
     "update_readme",
     "write_report",

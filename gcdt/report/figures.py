@@ -5,8 +5,9 @@
 * Fig. 3 (RQ4): success rate against dataset size (`dataset_size_figure`).
 * Fig. 4 (RQ5): success rate against the share of expert data (`expert_ratio_figure`).
 
-Fig. 3 and 4 read only the run results (`tables.load_runs`): one line per task, one panel per
-reward, the mean over seeds with its standard deviation as error bars.
+Fig. 2-4 and the learning curves read only the run results (`tables.load_runs`); Fig. 3 and 4
+draw one line per task, one panel per reward, the mean over seeds with its standard deviation
+as error bars.
 """
 
 from __future__ import annotations

@@ -10,7 +10,6 @@ makes a finished working run the new published results.
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -150,10 +149,14 @@ def write_check(
 
 def publish(
     profile: Profile, source_root: str | Path, published_root: str | Path = REPO_ROOT
-) -> list[Path]:
+) -> tuple[list[Path], list[Path]]:
     """Make the finished reproduction under `source_root` the published results of `profile`:
     results/<profile>/ and figures/<profile>/ mirror the source's (files that did not change
-    are left untouched, files the source lacks are removed). Refuses an unfinished grid."""
+    are left untouched, files the source lacks are removed). Returns (written, removed).
+
+    Only a whole `make reproduce` qualifies: every run of the grid done, and its record
+    (`reproduce.json`, written after the notebooks and the report) present.
+    """
     source = results_dir(profile.name, source_root)
     store = RunStore(source / "runs")
     unfinished = [
@@ -165,22 +168,36 @@ def publish(
             f"(e.g. {unfinished[0]}): finish them with `make reproduce PROFILE={profile.name}` "
             "before publishing"
         )
-    written = []
+    if not (source / "reproduce.json").is_file():
+        raise GcdtError(
+            f"{source} holds no reproduce.json: only a finished `make reproduce "
+            f"PROFILE={profile.name}` (runs, notebooks, report) can be published"
+        )
+    written, removed = [], []
     for src, dst in (
         (source, results_dir(profile.name, published_root)),
         (figures_dir(profile.name, source_root), figures_dir(profile.name, published_root)),
     ):
-        files = {
-            p.relative_to(src) for p in src.rglob("*") if p.is_file() and not p.name.startswith(".")
-        }
-        if dst.exists():
-            for old in dst.rglob("*"):
-                if old.is_file() and old.relative_to(dst) not in files:
-                    old.unlink()
+        files = _mirrored(src)
+        for rel in sorted(_mirrored(dst) - files):
+            (dst / rel).unlink()
+            removed.append(dst / rel)
         for rel in sorted(files):
             if write_if_changed(dst / rel, (src / rel).read_bytes()):
                 written.append(dst / rel)
         for folder in sorted((d for d in dst.rglob("*") if d.is_dir()), reverse=True):
             if not any(folder.iterdir()):
-                shutil.rmtree(folder)
-    return written
+                folder.rmdir()
+    return written, removed
+
+
+def _mirrored(root: Path) -> set[Path]:
+    """The files under `root` that publishing mirrors: none hidden, none in a hidden folder
+    (temp files, .ipynb_checkpoints)."""
+    if not root.exists():
+        return set()
+    return {
+        p.relative_to(root)
+        for p in root.rglob("*")
+        if p.is_file() and not any(part.startswith(".") for part in p.relative_to(root).parts)
+    }

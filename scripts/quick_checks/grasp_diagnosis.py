@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gcdt.paths import write_json_atomic
 from gcdt.policies.scripted import GRASP_WIDTH, MISSED_WIDTH
 from gcdt.policies.trained import TrainedPolicy
 from gcdt.rollout import VectorRollout
@@ -69,7 +70,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     result = diagnose(args.checkpoint, args.target_return, args.episodes)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    write_json_atomic(args.out, result)
     print(json.dumps(result))
 
 

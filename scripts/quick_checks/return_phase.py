@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from gcdt.data import load_dataset
+from gcdt.paths import write_json_atomic
 
 
 def return_phase(path: str) -> dict:
@@ -53,7 +54,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     result = return_phase(args.dataset)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    write_json_atomic(args.out, result)
     print(json.dumps(result))
 
 

@@ -18,7 +18,7 @@ from typing import Any
 from gcdt.baselines.tqc_her import RUN_FILES, tqc_config_names
 from gcdt.envs import REWARDS, TASKS
 from gcdt.errors import GcdtError
-from gcdt.evaluation import DEFAULT_TIMESTEPS
+from gcdt.evaluation import DEFAULT_TIMESTEPS, EvaluationConfig
 from gcdt.experiments.grid import SECTIONS
 from gcdt.experiments.profiles import PROFILES
 from gcdt.experiments.sweep import BACKENDS
@@ -94,12 +94,18 @@ def _npz_path(text: str) -> Path:
     return Path(text)
 
 
-def _add_field_option(parser: Any, field: dataclasses.Field, kind: Any, **settings: Any) -> None:
-    """Option `--field-name` for a dataclass field of type `kind`, parsed into `field.name`:
-    the field's default and help (`metadata["help"]`), and choices (a `Literal`), a switch
-    (`bool`), an integer of at least `metadata["minimum"]`, or `kind` as the type.
-    `settings` adds to or overrides these argparse settings (e.g. `metavar`)."""
-    option: dict[str, Any] = {"default": field.default, "help": field.metadata["help"]}
+def _add_field_option(
+    parser: Any, field: dataclasses.Field, kind: Any, flag: str | None = None, **settings: Any
+) -> None:
+    """Option `flag` (default `--field-name`) for a dataclass field of type `kind`, parsed into
+    `field.name`: the field's default and help (`metadata["help"]`), and choices (a
+    `Literal`), a switch (`bool`), an integer of at least `metadata["minimum"]`, or `kind` as
+    the type. `settings` adds to or overrides these argparse settings (e.g. `metavar`)."""
+    option: dict[str, Any] = {
+        "dest": field.name,
+        "default": field.default,
+        "help": field.metadata["help"],
+    }
     if kind is bool:
         option["action"] = "store_true"
     elif typing.get_origin(kind) is typing.Literal:
@@ -110,7 +116,27 @@ def _add_field_option(parser: Any, field: dataclasses.Field, kind: Any, **settin
         option["type"] = kind
     if field.default is not None and kind is not bool:
         option["help"] += " (default: %(default)s)"
-    parser.add_argument(f"--{field.name.replace('_', '-')}", **{**option, **settings})
+    parser.add_argument(flag or f"--{field.name.replace('_', '-')}", **{**option, **settings})
+
+
+def _add_config_options(
+    parser: argparse.ArgumentParser,
+    config: type,
+    exclusive: tuple[str, ...] = (),
+    settings: dict[str, dict[str, Any]] | None = None,
+) -> None:
+    """An option per field of the dataclass `config` (`_add_field_option`, with the field's
+    `settings`); those of the fields named in `exclusive` in one mutually exclusive group."""
+    kinds = typing.get_type_hints(config)
+    group = parser.add_mutually_exclusive_group() if exclusive else parser
+    for field in dataclasses.fields(config):
+        target = group if field.name in exclusive else parser
+        _add_field_option(target, field, kinds[field.name], **(settings or {}).get(field.name, {}))
+
+
+def _config_from(args: argparse.Namespace, config: type) -> Any:
+    """The dataclass `config` with the values of its options (`_add_config_options`)."""
+    return config(**{f.name: getattr(args, f.name) for f in dataclasses.fields(config)})
 
 
 def _build_parser() -> argparse.ArgumentParser:
@@ -145,15 +171,12 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     ev.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
     ev.add_argument("--task", required=True, choices=list(TASKS))
     ev.add_argument("--reward", required=True, choices=list(REWARDS))
-    budget = ev.add_mutually_exclusive_group()
-    budget.add_argument("--episodes", type=_positive_int, help="run this many whole episodes")
-    budget.add_argument(
-        "--timesteps",
-        type=_positive_int,
-        help=f"env steps in total (default {DEFAULT_TIMESTEPS})",
+    _add_config_options(
+        ev,
+        EvaluationConfig,
+        exclusive=("timesteps", "episodes"),
+        settings={"n_envs": {"flag": "--envs", "metavar": "N"}},
     )
-    ev.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
-    ev.add_argument("--seed", type=_int_at_least(0), default=0)
     ev.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
     ev.add_argument(
         "--target-return",
@@ -183,16 +206,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.out is not None:
         check_writable(args.out)  # before the run, not after it
     policy = make_policy(args.policy, args.task, **_policy_kwargs(args))
-    result = evaluate(
-        policy,
-        args.task,
-        args.reward,
-        timesteps=args.timesteps,
-        episodes=args.episodes,
-        n_envs=args.envs,
-        seed=args.seed,
-        progress=not args.no_progress,
-    )
+    config = dataclasses.asdict(_config_from(args, EvaluationConfig))
+    result = evaluate(policy, args.task, args.reward, **config, progress=not args.no_progress)
     summary = result.summary
     if args.out is not None:
         record = {"command": _command(args), **result.to_dict()}
@@ -419,12 +434,12 @@ def _train_arguments(tr: argparse.ArgumentParser) -> None:
     tr.add_argument("--dataset", required=True, type=Path, metavar="PATH.npz")
     tr.add_argument("--out", required=True, type=Path, metavar="DIR")
     tr.add_argument("--task", choices=list(TASKS), help="refuse a dataset of another task")
-    budget = tr.add_mutually_exclusive_group()  # steps or epochs
-    kinds = typing.get_type_hints(TrainConfig)
-    settings = {"context": {"metavar": "K"}, "checkpoint_seconds": {"metavar": "S"}}
-    for field in dataclasses.fields(TrainConfig):
-        group = budget if field.name in ("steps", "epochs") else tr
-        _add_field_option(group, field, kinds[field.name], **settings.get(field.name, {}))
+    _add_config_options(
+        tr,
+        TrainConfig,
+        exclusive=("steps", "epochs"),
+        settings={"context": {"metavar": "K"}, "checkpoint_seconds": {"metavar": "S"}},
+    )
     tr.add_argument("--resume", action="store_true", help=f"continue from --out/{CHECKPOINT_NAME}")
     tr.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
@@ -437,7 +452,7 @@ def _train(args: argparse.Namespace) -> int:
     dataset = load_dataset(args.dataset)
     if args.task is not None and dataset.task != args.task:
         raise GcdtError(f"{args.dataset} holds {dataset.task!r} data, not {args.task!r}")
-    cfg = TrainConfig(**{f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig)})
+    cfg = _config_from(args, TrainConfig)
     result = train(dataset, cfg, args.out, resume=args.resume, progress=not args.no_progress)
     print(
         f"trained {result.steps} steps in {result.seconds:.0f} s, final loss "

@@ -25,8 +25,36 @@ from gcdt.paths import write_if_changed
 from gcdt.policies.base import Policy
 from gcdt.progress import progress_bar
 from gcdt.rollout import VectorRollout
+from gcdt.settings import check_minimums, setting
 
 DEFAULT_TIMESTEPS = 10_000  # the paper's evaluation budget per (run, seed)
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """How a policy is measured; the defaults are the paper's protocol. `evaluate` takes each
+    field as a keyword, and `gcdt evaluate` as an option."""
+
+    timesteps: int | None = setting(
+        None, f"env steps in total (default {DEFAULT_TIMESTEPS})", minimum=1
+    )
+    episodes: int | None = setting(None, "run this many whole episodes", minimum=1)
+    n_envs: int = setting(1, "parallel env processes", minimum=1)
+    seed: int = setting(0, "episode j is reset with episode_seed(seed, j)", minimum=0)
+
+    def __post_init__(self) -> None:
+        if self.timesteps is not None and self.episodes is not None:
+            raise GcdtError("give either timesteps or episodes, not both")
+        check_minimums(self, integer=(int, np.integer))
+
+    def total_timesteps(self) -> int | None:
+        """The env steps to run: `timesteps`, else the paper's budget unless `episodes`."""
+        if self.timesteps is None and self.episodes is None:
+            return DEFAULT_TIMESTEPS
+        return self.timesteps
+
+
+_PAPER = EvaluationConfig()
 
 
 @dataclass(frozen=True)
@@ -88,34 +116,26 @@ class EvaluationResult:
         }
 
 
-def _positive(name: str, value: int | None) -> None:
-    if value is not None and (not isinstance(value, int | np.integer) or value < 1):
-        raise GcdtError(f"{name} must be a positive integer, got {value!r}")
-
-
 def evaluate(
     policy: Policy,
     task: str,
     reward: str,
     *,
-    timesteps: int | None = None,
-    episodes: int | None = None,
-    n_envs: int = 1,
-    seed: int = 0,
+    timesteps: int | None = _PAPER.timesteps,
+    episodes: int | None = _PAPER.episodes,
+    n_envs: int = _PAPER.n_envs,
+    seed: int = _PAPER.seed,
     progress: bool = True,
 ) -> EvaluationResult:
     """Run `policy` on `task` with `reward` and measure it.
 
     Give either `timesteps` (the paper's protocol; the default, 10,000) or `episodes` (that
-    many whole episodes, independent of their lengths). `n_envs > 1` steps envs in parallel
-    processes, and the policy sees the whole batch each step.
+    many whole episodes, independent of their lengths); `EvaluationConfig` checks them.
+    `n_envs > 1` steps envs in parallel processes, and the policy sees the whole batch each
+    step.
     """
-    if timesteps is not None and episodes is not None:
-        raise GcdtError("give either timesteps or episodes, not both")
-    if timesteps is None and episodes is None:
-        timesteps = DEFAULT_TIMESTEPS
-    _positive("timesteps", timesteps)
-    _positive("episodes", episodes)
+    config = EvaluationConfig(timesteps=timesteps, episodes=episodes, n_envs=n_envs, seed=seed)
+    timesteps = config.total_timesteps()
     rollout = VectorRollout(policy, task, reward, n_envs, seed)  # validates the rest
 
     records: list[EpisodeRecord] = []

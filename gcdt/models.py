@@ -207,9 +207,9 @@ class BCConfig:
 
     state_dim: int
     action_dim: int
-    hidden: int = 128
-    layers: int = 3
-    dropout: float = 0.1
+    hidden: int = DTConfig.hidden  # the DT's defaults, declared there
+    layers: int = DTConfig.layers
+    dropout: float = DTConfig.dropout
 
 
 class BCPolicyNet(nn.Module):

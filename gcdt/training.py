@@ -45,6 +45,7 @@ from gcdt.models import DTConfig, GoalConditioning, state_columns
 from gcdt.paths import atomic_write
 from gcdt.progress import progress_bar
 from gcdt.provenance import package_versions, utc_now
+from gcdt.settings import check_minimums, setting
 
 Method = Literal["dt", "bc"]
 METHODS: tuple[str, ...] = get_args(Method)
@@ -57,53 +58,46 @@ SCHEDULING_FIELDS = ("checkpoint_every", "checkpoint_seconds")
 _MODEL_DEFAULTS = {f.name: f.default for f in fields(DTConfig)}
 
 
-def _setting(default: Any, help: str, *, minimum: int | None = None) -> Any:
-    """A `TrainConfig` field: its default, what it means (`gcdt train --help` shows it), and
-    for an integer the least value it may take."""
-    metadata = {"help": help} if minimum is None else {"help": help, "minimum": minimum}
-    return field(default=default, metadata=metadata)
-
-
 @dataclass(frozen=True)
 class TrainConfig:
     """What to train and how; the defaults are the paper's."""
 
-    method: Method = _setting("dt", "dt: a Decision Transformer; bc: behavioural cloning")
-    goal_conditioning: GoalConditioning = _setting(
+    method: Method = setting("dt", "dt: a Decision Transformer; bc: behavioural cloning")
+    goal_conditioning: GoalConditioning = setting(
         "desired+achieved",
         "what the state holds besides the observation; desired+achieved is the paper's GC-DT",
     )
-    reward: RewardType = _setting("sparse", "the rewards that make the returns-to-go")
-    steps: int | None = _setting(None, "gradient steps", minimum=1)
-    epochs: int | None = _setting(
+    reward: RewardType = setting("sparse", "the rewards that make the returns-to-go")
+    steps: int | None = setting(None, "gradient steps", minimum=1)
+    epochs: int | None = setting(
         None,
         "the authors' epochs of ceil(#episodes / batch size) steps; "
         f"neither steps nor epochs given: {PAPER_EPOCHS} epochs",
         minimum=1,
     )
-    batch_size: int = _setting(64, "windows (DT) or transitions (BC) per step", minimum=1)
-    lr: float = _setting(1e-4, "AdamW peak learning rate")
-    weight_decay: float = _setting(1e-4, "AdamW weight decay")
-    warmup_fraction: float = _setting(0.1, "share of the steps of linear warm-up, then decay")
-    grad_clip: float = _setting(0.25, "gradient-norm clip")
-    return_scale: float = _setting(100.0, "returns-to-go are divided by this")
-    context: int = _setting(
+    batch_size: int = setting(64, "windows (DT) or transitions (BC) per step", minimum=1)
+    lr: float = setting(1e-4, "AdamW peak learning rate")
+    weight_decay: float = setting(1e-4, "AdamW weight decay")
+    warmup_fraction: float = setting(0.1, "share of the steps of linear warm-up, then decay")
+    grad_clip: float = setting(0.25, "gradient-norm clip")
+    return_scale: float = setting(100.0, "returns-to-go are divided by this")
+    context: int = setting(
         _MODEL_DEFAULTS["context"],
         "K, the steps a DT sees (return-to-go, state, action)",
         minimum=1,
     )
-    hidden: int = _setting(_MODEL_DEFAULTS["hidden"], "the model's width", minimum=1)
-    layers: int = _setting(
+    hidden: int = setting(_MODEL_DEFAULTS["hidden"], "the model's width", minimum=1)
+    layers: int = setting(
         _MODEL_DEFAULTS["layers"], "transformer blocks, or BC's hidden layers", minimum=1
     )
-    heads: int = _setting(_MODEL_DEFAULTS["heads"], "attention heads (DT)", minimum=1)
-    dropout: float = _setting(_MODEL_DEFAULTS["dropout"], "dropout probability")
-    seed: int = _setting(0, "seeds the initial weights, dropout and batches", minimum=0)
-    device: str = _setting("auto", "auto (CUDA when present, else CPU), cpu, cuda or cuda:N")
-    bf16: bool = _setting(False, "bfloat16 autocast for the forward pass")
-    log_every: int = _setting(50, "a train_log.csv row every this many steps", minimum=1)
-    checkpoint_every: int = _setting(1000, "a checkpoint every this many steps", minimum=1)
-    checkpoint_seconds: float = _setting(
+    heads: int = setting(_MODEL_DEFAULTS["heads"], "attention heads (DT)", minimum=1)
+    dropout: float = setting(_MODEL_DEFAULTS["dropout"], "dropout probability")
+    seed: int = setting(0, "seeds the initial weights, dropout and batches", minimum=0)
+    device: str = setting("auto", "auto (CUDA when present, else CPU), cpu, cuda or cuda:N")
+    bf16: bool = setting(False, "bfloat16 autocast for the forward pass")
+    log_every: int = setting(50, "a train_log.csv row every this many steps", minimum=1)
+    checkpoint_every: int = setting(1000, "a checkpoint every this many steps", minimum=1)
+    checkpoint_seconds: float = setting(
         30.0,
         "at most this many seconds between checkpoints (and log writes), besides one "
         "every checkpoint_every steps",
@@ -115,13 +109,7 @@ class TrainConfig:
         check_reward(self.reward)
         if self.steps is not None and self.epochs is not None:
             raise GcdtError("give one budget, steps or epochs, not both")
-        for f in fields(self):
-            minimum, value = f.metadata.get("minimum"), getattr(self, f.name)
-            if minimum is None or value is None:
-                continue
-            if not isinstance(value, int) or value < minimum:
-                wanted = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
-                raise GcdtError(f"{f.name} must be {wanted}, got {value!r}")
+        check_minimums(self)
         # Real-valued settings and their ranges; NaN fails every comparison, so it is refused.
         for name, ok, wanted in (
             ("lr", lambda v: v > 0, "> 0"),

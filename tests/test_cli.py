@@ -163,6 +163,21 @@ def test_train_options_are_trainconfig_fields():
     assert (args.batch_size, args.bf16, args.goal_conditioning) == (8, True, "none")
 
 
+def test_evaluate_options_are_evaluationconfig_fields():
+    """`gcdt evaluate` has an option per `EvaluationConfig` field, with the field's default."""
+    from gcdt.cli import _build_parser
+    from gcdt.evaluation import EvaluationConfig
+
+    argv = ["evaluate", *RANDOM_REACH]
+    args = _build_parser().parse_args(argv)
+    fields = dataclasses.fields(EvaluationConfig)
+    assert EvaluationConfig(**{f.name: getattr(args, f.name) for f in fields}) == (
+        EvaluationConfig()
+    )
+    args = _build_parser().parse_args([*argv, "--envs", "3", "--episodes", "2", "--seed", "7"])
+    assert (args.n_envs, args.episodes, args.timesteps, args.seed) == (3, 2, None, 7)
+
+
 def test_only_train_imports_torch():
     """The other commands, and `gcdt --help`, never wait for torch: `gcdt train` adds its
     options (from `TrainConfig`) when it parses."""

@@ -66,22 +66,10 @@ def _authors_model(ckpt: dict, device: str) -> tuple[Callable[..., torch.Tensor]
 
         policy = TrainedPolicy(ckpt, device=device)
         return policy.model, "gcdt GoalConditionedDT (transformers not installed)"
-    hf = (
-        transformers.DecisionTransformerModel(
-            transformers.DecisionTransformerConfig(
-                state_dim=cfg["state_dim"],
-                act_dim=cfg["action_dim"],
-                hidden_size=cfg["hidden"],
-                n_layer=cfg["layers"],
-                n_head=cfg["heads"],
-                activation_function="relu",
-                max_ep_len=cfg["max_episode_steps"],
-                action_tanh=True,
-            )
-        )
-        .to(device)
-        .eval()
-    )
+    from gcdt.hf_reference import hf_model
+    from gcdt.models import DTConfig
+
+    hf = hf_model(DTConfig(**cfg)).to(device).eval()
 
     def forward(states, actions, rtg, timesteps, mask):
         return hf(

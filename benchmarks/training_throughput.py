@@ -92,25 +92,11 @@ def _gcdt(cfg: TrainConfig, dim: int, batches: list[dict[str, torch.Tensor]]):
 
 
 def _huggingface(bf16: bool, dim: int, batches: list[dict[str, torch.Tensor]]):
-    import transformers
+    from gcdt.hf_reference import hf_model
 
     torch.manual_seed(0)
-    config = transformers.DecisionTransformerConfig(
-        state_dim=dim,
-        act_dim=4,
-        hidden_size=128,
-        n_layer=3,
-        n_head=1,
-        n_inner=None,
-        activation_function="relu",
-        resid_pdrop=0.1,
-        embd_pdrop=0.1,
-        attn_pdrop=0.1,
-        max_ep_len=1000,
-        action_tanh=True,
-    )
     device = batches[0]["states"].device
-    model = transformers.DecisionTransformerModel(config).to(device).train()
+    model = hf_model(DTConfig(dim, 4)).to(device).train()
     opt = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=1e-4)
 
     def step(i: int) -> None:

@@ -66,22 +66,14 @@ def _authors_model(ckpt: dict, device: str) -> tuple[Callable[..., torch.Tensor]
 
         policy = TrainedPolicy(ckpt, device=device)
         return policy.model, "gcdt GoalConditionedDT (transformers not installed)"
-    from gcdt.hf_reference import hf_model
+    from gcdt.hf_reference import hf_actions, hf_model
     from gcdt.models import DTConfig
 
     hf = hf_model(DTConfig(**cfg)).to(device).eval()
 
-    def forward(states, actions, rtg, timesteps, mask):
-        return hf(
-            states=states,
-            actions=actions,
-            returns_to_go=rtg,
-            timesteps=timesteps,
-            attention_mask=mask.long(),
-            return_dict=False,
-        )[1]
-
-    return forward, f"transformers {transformers.__version__} DecisionTransformerModel"
+    return functools.partial(
+        hf_actions, hf
+    ), f"transformers {transformers.__version__} DecisionTransformerModel"
 
 
 def authors_unbatched(task: str, ckpt: dict, timesteps: int, device: str) -> float:

@@ -92,7 +92,7 @@ def _gcdt(cfg: TrainConfig, dim: int, batches: list[dict[str, torch.Tensor]]):
 
 
 def _huggingface(bf16: bool, dim: int, batches: list[dict[str, torch.Tensor]]):
-    from gcdt.hf_reference import hf_model
+    from gcdt.hf_reference import hf_actions, hf_model
 
     torch.manual_seed(0)
     device = batches[0]["states"].device
@@ -102,13 +102,8 @@ def _huggingface(bf16: bool, dim: int, batches: list[dict[str, torch.Tensor]]):
     def step(i: int) -> None:
         b = batches[i % len(batches)]
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
-            _, pred, _ = model(
-                states=b["states"],
-                actions=b["actions"],
-                returns_to_go=b["returns_to_go"],
-                timesteps=b["timesteps"],
-                attention_mask=b["mask"].long(),
-                return_dict=False,
+            pred = hf_actions(
+                model, b["states"], b["actions"], b["returns_to_go"], b["timesteps"], b["mask"]
             )
             keep = b["mask"].reshape(-1)  # the authors' loss: real tokens only
             loss = torch.mean((pred.reshape(-1, 4)[keep] - b["actions"].reshape(-1, 4)[keep]) ** 2)

@@ -36,6 +36,19 @@ def hf_model(cfg: DTConfig) -> Any:
     return transformers.DecisionTransformerModel(config)
 
 
+def hf_actions(hf: Any, states, actions, returns_to_go, timesteps, mask) -> Any:
+    """HF's predicted actions `[batch, K, action_dim]`, called with `GoalConditionedDT`'s
+    arguments in its order (`mask` is the boolean left-padding mask)."""
+    return hf(
+        states=states,
+        actions=actions,
+        returns_to_go=returns_to_go,
+        timesteps=timesteps,
+        attention_mask=mask.long(),
+        return_dict=False,
+    )[1]
+
+
 def copy_hf_weights(hf: Any, ours: GoalConditionedDT) -> None:
     """Load `hf`'s weights into `ours`. HF's GPT-2 keeps Conv1D (transposed Linear) weights,
     and adds `wpe[0]` to every token after the embedding LayerNorm (it passes position ids of

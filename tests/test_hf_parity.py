@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import torch
 
-from gcdt.hf_reference import copy_hf_weights, hf_model
+from gcdt.hf_reference import copy_hf_weights, hf_actions, hf_model
 from gcdt.models import DTConfig, GoalConditionedDT
 
 
@@ -29,13 +29,6 @@ def test_same_actions_as_huggingface():
     mask = torch.ones(b, k, dtype=torch.bool)
     mask[1, :7] = False  # left padding in one sequence
     with torch.no_grad():
-        _, expected, _ = hf(
-            states=states,
-            actions=actions,
-            returns_to_go=rtg,
-            timesteps=timesteps,
-            attention_mask=mask.long(),
-            return_dict=False,
-        )
+        expected = hf_actions(hf, states, actions, rtg, timesteps, mask)
         got = ours(states, actions, rtg, timesteps, mask)
     torch.testing.assert_close(got[mask], expected[mask], rtol=1e-5, atol=1e-5)

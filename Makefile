@@ -55,7 +55,7 @@ bench: install
 	for task in reach push pick_and_place; do \
 	  $(PY) benchmarks/collection_throughput.py --task $$task || exit 1; done
 	$(PY) benchmarks/dataset_io.py --task push
-	$(PY) benchmarks/tqc_her.py throughput --learning-steps 100
+	$(PY) benchmarks/tqc_her.py throughput
 	$(PY) benchmarks/run_costs.py
 	$(PY) benchmarks/end_to_end.py
 	$(PY) benchmarks/summary.py --docs

@@ -347,16 +347,21 @@ def tqc_section() -> str | None:
                 name,
                 "x".join(map(str, c["net_arch"])),
                 c["batch_size"],
-                f"{c['learning_steps_per_second']:.1f}",
-                f"{c['hours_for_paper_budget']:.1f}",
+                f"{c['sb3']['env_steps_per_second']:.1f}",
+                f"{c['new']['env_steps_per_second']:.1f}",
+                f"{c['speedup_vs_sb3']:.2f}x",
+                " / ".join(f"{h:.1f}" for h in c["hours_for_paper_budget"].values()),
             ]
             for name, c in speed["configs"].items()
         ]
+        new = next(iter(speed["configs"].values()))["new"]
         parts.append(
-            f"TQC+HER training speed on {speed['task']}, env steps/s once gradient steps run "
-            "(`benchmarks/tqc_her.py throughput`; hours: the paper's step budget of that task "
-            "at this speed):\n\n"
-            + _table(["config", "networks", "batch", "env steps / s", "hours"], rows)
+            f"TQC+HER training speed on {speed['task']}, env steps/s once gradient steps run, "
+            "today's loop (sb3-contrib's TQC on one env, rl-baselines3-zoo's) against the "
+            f"configs' ({new['backend']} backend on {new['n_envs']} envs, one gradient step "
+            "per env step), measured in one run (`benchmarks/tqc_her.py throughput`; hours: "
+            f"the paper's step budget of that task at each speed; {speed['target']}):\n\n"
+            + _table(["config", "networks", "batch", "sb3, 1 env", "new", "speedup", "hours"], rows)
         )
     if reach is not None:
         rows = [

@@ -15,6 +15,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from gcdt.baselines.tqc_her import BACKENDS as TQC_BACKENDS
 from gcdt.baselines.tqc_her import RUN_FILES, tqc_config_names
 from gcdt.envs import REWARDS, TASKS
 from gcdt.errors import GcdtError
@@ -55,6 +56,17 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # type: ignore[override]
         print(f"gcdt: error: {message}", file=sys.stderr)
         raise SystemExit(USAGE_ERROR)
+
+
+def _success_rate(text: str) -> float:
+    """An argparse type: a success rate in (0, 1]."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value <= 1:  # NaN fails too
+        raise argparse.ArgumentTypeError(f"expected a success rate in (0, 1], got {text}")
+    return value
 
 
 def _int_at_least(minimum: int) -> Callable[[str], int]:
@@ -467,7 +479,7 @@ def _tqc_parser(sub: argparse._SubParsersAction) -> None:
     tt = tqsub.add_parser(
         "train",
         help="train TQC+HER online on one task and reward",
-        description="Train sb3-contrib TQC with HER (hyperparameters: gcdt/baselines/"
+        description="Train TQC with HER (hyperparameters and loop: gcdt/baselines/"
         f"tqc_her.yaml), evaluating it periodically; writes {', '.join(RUN_FILES)} to --out.",
     )
     tt.add_argument("--task", required=True, choices=list(TASKS))
@@ -480,6 +492,20 @@ def _tqc_parser(sub: argparse._SubParsersAction) -> None:
         help="paper: rl-baselines3-zoo her-defaults (GPU-scale); cpu: smaller nets and batches",
     )
     tt.add_argument("--steps", type=_positive_int, help="env steps (default: the config's)")
+    tt.add_argument(
+        "--backend",
+        choices=list(TQC_BACKENDS),
+        help="sbx: SBX's JAX TQC, ~3x faster on CPU; sb3: sb3-contrib's (default: the config's)",
+    )
+    tt.add_argument(
+        "--n-envs", type=_positive_int, metavar="N", help="envs side by side (default: config's)"
+    )
+    tt.add_argument(
+        "--stop-at",
+        type=_success_rate,
+        metavar="RATE",
+        help="stop at the first evaluation whose success rate reaches RATE (0-1]",
+    )
     tt.add_argument("--seed", type=_int_at_least(0), default=0)
     tt.add_argument(
         "--eval-every", type=_positive_int, metavar="N", help="env steps between evaluations"
@@ -495,8 +521,8 @@ def _tqc_train(args: argparse.Namespace) -> int:
 
     check_writable(args.out, folder=True)
     cfg = load_tqc_config(args.config, args.task)
-    if args.steps is not None:
-        cfg = cfg.with_budget(steps=args.steps)
+    changes = {"steps": args.steps, "backend": args.backend, "n_envs": args.n_envs}
+    cfg = cfg.with_budget(**{k: v for k, v in changes.items() if v is not None})
     result = train_tqc(
         args.task,
         args.reward,
@@ -506,6 +532,7 @@ def _tqc_train(args: argparse.Namespace) -> int:
         eval_every=args.eval_every,
         eval_episodes=args.eval_episodes,
         device=args.device,
+        stop_at=args.stop_at,
         progress=not args.no_progress,
         command=_command(args),
     )

@@ -4,7 +4,7 @@ Facts this module encodes (also listed in docs/architecture.md):
 
 * panda-gym 3.0.7 re-seeds the task RNG on *every* `reset`, from OS entropy when no seed is
   given, so a seed-less reset is never reproducible. Every episode we run is therefore reset
-  with an explicit seed from `episode_seed(seed, index)`.
+  with an explicit seed from `episode_seed(seed, index, stream)`, one stream per purpose.
 * Gymnasium sorts Dict observation keys alphabetically; the paper's state order is
   `[observation, desired_goal, achieved_goal]` and `goal_state` builds exactly that.
 * Rewards are a pure function of (achieved_goal, desired_goal), so one trajectory yields both
@@ -163,28 +163,53 @@ def make_vec_env(
 # Seeds, states and rewards
 
 
-def episode_seed(seed: int, index: int) -> int:
-    """The reset seed of episode `index` of a run seeded with `seed`.
+#: What a run's episodes are for. Each purpose draws its reset seeds from a stream of its
+#: own, so that no evaluation episode starts from an instance (goal, object position) that an
+#: expert or random collection, or TQC+HER's online training, played: evaluation is held out
+#: by construction, whatever seeds the runs are given.
+SEED_STREAMS = {"evaluation": 1, "collection": 2, "random-collection": 3, "tqc-training": 4}
+
+
+def episode_seed(seed: int, index: int, stream: str = "evaluation") -> int:
+    """The reset seed of episode `index` of a run seeded with `seed`, for purpose `stream`.
 
     Derived through `SeedSequence` rather than `seed + index`, so that the episodes of runs
-    with seeds 0, 1, 2 do not overlap.
+    with seeds 0, 1, 2 do not overlap, and 63 bits wide, so that the millions of episodes of
+    a grid do not collide by chance (32 bits would, with a few percent probability).
     """
-    return int(np.random.SeedSequence(seed, spawn_key=(index,)).generate_state(1)[0])
+    if stream not in SEED_STREAMS:
+        raise GcdtError(
+            f"unknown seed stream {stream!r}: expected one of {', '.join(SEED_STREAMS)}"
+        )
+    sequence = np.random.SeedSequence(seed, spawn_key=(SEED_STREAMS[stream], index))
+    return int(sequence.generate_state(1, np.uint64)[0] >> np.uint64(1))
 
 
 class SeededResets(gym.Wrapper):
-    """Resets episode `i` with `episode_seed(seed, i)`, whatever seed the caller passes.
+    """Resets its `j`-th episode with `episode_seed(seed, offset + j * stride, stream)`,
+    whatever seed the caller passes.
 
     For learners that reset their env themselves (SB3 resets seed-less after the first
-    episode), so that their episodes, and hence their runs, are reproducible.
+    episode), so that their episodes, and hence their runs, are reproducible. Env `k` of `n`
+    side by side takes `offset=k, stride=n`: together they play a one-env run's instances.
     """
 
-    def __init__(self, env: gym.Env, seed: int) -> None:
+    def __init__(
+        self,
+        env: gym.Env,
+        seed: int,
+        *,
+        offset: int = 0,
+        stride: int = 1,
+        stream: str = "tqc-training",
+    ) -> None:
         super().__init__(env)
-        self.base_seed, self.episodes = int(seed), 0
+        self.base_seed, self.episodes, self.stream = int(seed), 0, stream
+        self.offset, self.stride = int(offset), int(stride)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        seed = episode_seed(self.base_seed, self.episodes)
+        index = self.offset + self.episodes * self.stride
+        seed = episode_seed(self.base_seed, index, self.stream)
         self.episodes += 1
         return self.env.reset(seed=seed, options=options)
 

@@ -5,7 +5,8 @@ over the vector of envs, count every episode that finished within them and drop 
 tails; an episode succeeds if the success condition held at any of its steps; its return is the
 sum of its rewards. Alternatively, run a fixed number of whole episodes.
 
-Episode `j` of a run is always reset with `episode_seed(seed, j)` and episodes are handed to
+Episode `j` of a run is always reset with `episode_seed(seed, j, "evaluation")` (a seed
+stream no collection or training draws from: evaluation is held out) and episodes are handed to
 envs in the order they free up, so a run is deterministic for a given `seed` and `n_envs`.
 """
 
@@ -19,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from gcdt.envs import episode_seed, goal_distance
+from gcdt.envs import goal_distance
 from gcdt.errors import GcdtError
 from gcdt.paths import write_if_changed
 from gcdt.policies.base import Policy
@@ -62,7 +63,7 @@ class EpisodeRecord:
     """One finished episode."""
 
     index: int  # position in the run's episode sequence
-    seed: int  # the reset seed, `episode_seed(run_seed, index)`
+    seed: int  # the reset seed, `episode_seed(run_seed, index, "evaluation")`
     length: int  # steps taken
     ret: float  # sum of rewards of the evaluated reward type
     success: bool  # success condition met at any step
@@ -172,7 +173,7 @@ def evaluate(
                     records.append(
                         EpisodeRecord(
                             index=j,
-                            seed=episode_seed(seed, j),
+                            seed=rollout.seed_of(j),
                             length=int(ep_length[i]),
                             ret=float(ep_return[i]),
                             success=bool(ep_success[i]),

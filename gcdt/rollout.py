@@ -1,7 +1,7 @@
 """The one stepping loop behind the evaluator and the collector.
 
 `VectorRollout` runs a policy on a vector of envs and hands out episodes in index order as
-envs free up: episode `j` is always reset with `episode_seed(seed, j)`. Everything that
+envs free up: episode `j` is always reset with `episode_seed(seed, j, stream)`. Everything that
 varies between its users (what to count, what to record, when to stop) stays with them; the
 loop itself, the seeding and the per-env episode bookkeeping live only here.
 """
@@ -45,7 +45,8 @@ class VectorRollout:
     still show its end: the place to render a frame), and then resets the envs whose episode
     ended, with the next episode indices in env order. The run is deterministic for a given
     `seed` and `n_envs` (each env then sees the same history; see `gcdt.envs` on Bullet's warm
-    starts). `env_kwargs` go to each env's constructor (e.g. `render_width`). `obs`, the
+    starts). `stream` is the purpose the episodes' seeds are drawn for (`SEED_STREAMS` in
+    `gcdt.envs`). `env_kwargs` go to each env's constructor (e.g. `render_width`). `obs`, the
     observation the next step acts in, may be replaced after a change to the envs.
     """
 
@@ -59,6 +60,7 @@ class VectorRollout:
         *,
         env_kwargs: Mapping[str, Any] | None = None,
         on_step: Callable[[VectorStep], None] | None = None,
+        stream: str = "evaluation",
     ) -> None:
         spec = get_task(task)
         check_reward(reward)
@@ -75,7 +77,8 @@ class VectorRollout:
         if not isinstance(seed, int | np.integer) or seed < 0:
             raise GcdtError(f"seed must be a non-negative integer, got {seed!r}")
         self.policy, self.task, self.reward = policy, spec.name, reward
-        self.n_envs, self.seed = int(n_envs), int(seed)
+        self.n_envs, self.seed, self.stream = int(n_envs), int(seed), stream
+        episode_seed(self.seed, 0, stream)  # an unknown stream fails here, before envs start
         self.env_kwargs, self.on_step = dict(env_kwargs or {}), on_step
         self.stepping_started = 0.0  # perf_counter() once the envs are up and reset
 
@@ -99,7 +102,7 @@ class VectorRollout:
 
     def seed_of(self, episode: int) -> int:
         """The reset seed of episode `episode` of this run."""
-        return episode_seed(self.seed, int(episode))
+        return episode_seed(self.seed, int(episode), self.stream)
 
     def step(self) -> VectorStep:
         """Advance every env by one step (see the class docstring)."""

@@ -38,7 +38,8 @@ def test_collected_data_is_what_the_env_returned(task, policy):
 
     # Whole episodes, the first of the run, just reaching the request.
     assert len(ds) >= 120 and len(ds) - ds.episode_lengths[-1] < 120
-    seeds = [episode_seed(3, j) for j in range(ds.n_episodes)]
+    stream = "random-collection" if policy == "random" else "collection"
+    seeds = [episode_seed(3, j, stream) for j in range(ds.n_episodes)]
     np.testing.assert_array_equal(ds.arrays["episode_seed"], seeds)
 
     sparse, dense = _replay(ds, "sparse"), _replay(ds, "dense")

@@ -117,9 +117,18 @@ def test_relabelled_rewards_equal_env_rewards(task):
 
 
 def test_episode_seeds_distinct_and_stable():
-    seeds = [episode_seed(s, j) for s in range(3) for j in range(1000)]
-    assert len(set(seeds)) == len(seeds)  # runs with seeds 0, 1, 2 share no episode
-    assert episode_seed(0, 5) == episode_seed(0, 5)
+    seeds = [
+        episode_seed(s, j, stream)
+        for s in range(3)
+        for j in range(1000)
+        for stream in ("evaluation", "collection", "random-collection", "tqc-training")
+    ]
+    # Runs with seeds 0, 1, 2 share no episode, and neither do the purposes of one seed.
+    assert len(set(seeds)) == len(seeds)
+    assert episode_seed(0, 5) == episode_seed(0, 5) == episode_seed(0, 5, "evaluation")
+    assert all(0 <= s < 2**63 for s in seeds)  # fits a dataset's int64 episode_seed
+    with pytest.raises(GcdtError, match="unknown seed stream 'train': expected one of"):
+        episode_seed(0, 5, "train")
 
 
 def _seeded_rollouts(task: str) -> dict[str, np.ndarray]:

@@ -29,6 +29,8 @@ def test_paper_config_is_rl_zoo_her_defaults():
     assert (cfg.net_arch, cfg.n_critics) == ((512, 512, 512), 2)
     assert (cfg.n_sampled_goal, cfg.goal_selection_strategy) == (4, "future")
     assert cfg.steps == 1_000_000 and cfg.overrides == {}
+    # The loop: SBX's TQC on 8 envs, one gradient step per env step as in the zoo.
+    assert (cfg.backend, cfg.n_envs, cfg.train_freq, cfg.gradient_steps) == ("sbx", 8, 1, 1)
     assert load_tqc_config("paper", "reach").steps == 20_000
     assert {"paper", "cpu"} <= set(tqc_config_names())
 
@@ -49,7 +51,9 @@ def test_cpu_config_records_what_it_changed():
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
-        ({"gamma": 0.9}, "gamma is not a budget value"),
+        ({"gamma": 0.9}, "gamma is not a budget or loop value"),
+        ({"backend": "tf"}, "unknown TQC\\+HER backend 'tf': expected one of sb3, sbx"),
+        ({"n_envs": 0}, "n_envs must be an integer >= 1"),
         ({"steps": 0}, "steps must be an integer >= 1"),
         ({"steps": -5}, "steps must be an integer >= 1"),
         ({"net_arch": []}, "net_arch must be a list of positive layer sizes"),
@@ -65,15 +69,30 @@ def test_unknown_config_name():
         load_tqc_config("gpu", "reach")
 
 
+def _smoke_run(out, backend):
+    """A few hundred steps of real TQC+HER training on Push (a smoke run, not a good agent)."""
+    cfg = load_tqc_config("cpu", "push").with_budget(
+        steps=320,
+        learning_starts=100,
+        batch_size=32,
+        net_arch=[32, 32],
+        buffer_size=2000,
+        backend=backend,
+        n_envs=2,  # two episodes before the first gradient step
+    )
+    return train_tqc("push", "sparse", cfg, out, eval_every=160, eval_episodes=2, progress=False)
+
+
 @pytest.fixture(scope="module")
 def push_run(tmp_path_factory):
-    """A few hundred steps of real TQC+HER training on Push (a smoke run, not a good agent)."""
-    out = tmp_path_factory.mktemp("tqc") / "push"
-    cfg = load_tqc_config("cpu", "push").with_budget(
-        steps=300, learning_starts=100, batch_size=32, net_arch=[32, 32], buffer_size=2000
-    )
-    result = train_tqc("push", "sparse", cfg, out, eval_every=150, eval_episodes=2, progress=False)
-    return result
+    """The default backend: SBX's TQC."""
+    return _smoke_run(tmp_path_factory.mktemp("tqc") / "push", "sbx")
+
+
+@pytest.fixture(scope="module")
+def push_run_sb3(tmp_path_factory):
+    """The zoo's library: sb3-contrib's TQC."""
+    return _smoke_run(tmp_path_factory.mktemp("tqc") / "push_sb3", "sb3")
 
 
 def test_smoke_run_writes_models_curve_and_record(push_run):
@@ -81,21 +100,30 @@ def test_smoke_run_writes_models_curve_and_record(push_run):
     assert sorted(p.name for p in out.iterdir()) == sorted(RUN_FILES)
     with open(out / "eval.csv") as f:
         rows = list(csv.DictReader(f))
-    assert [int(r["env_steps"]) for r in rows] == [150, 300]
+    assert [int(r["env_steps"]) for r in rows] == [160, 320]
     assert all(int(r["episodes"]) == 2 for r in rows)
     run = json.loads((out / "run.json").read_text())
-    assert run["env_steps"] == push_run.env_steps == 300
-    assert run["overrides"]["steps"] == [1_000_000, 300]
+    assert run["env_steps"] == push_run.env_steps == 320
+    assert run["overrides"]["steps"] == [1_000_000, 320]
     assert run["config"]["batch_size"] == 32 and run["reward"] == "sparse"
+    assert run["config"]["backend"] == "sbx" and run["device"] == "cpu"
+    assert "sbx-rl" in run["versions"] and "jax" in run["versions"]
     assert 0 < run["train_seconds"] <= run["wall_seconds"]
     assert run["env_steps_per_second"] > 0
-    assert run["final"]["env_steps"] == 300
+    assert run["final"]["env_steps"] == 320
     assert run["final"]["success_rate"] == float(rows[-1]["success_rate"])
 
 
-def test_zip_is_a_policy_acting_like_sb3s_own_loader(push_run):
-    from sb3_contrib import TQC
+@pytest.mark.parametrize("backend", ["sbx", "sb3"])
+def test_zip_is_a_policy_acting_like_the_backends_own_loader(backend, request):
+    if backend == "sbx":
+        from sbx import TQC
 
+        push_run = request.getfixturevalue("push_run")
+    else:
+        from sb3_contrib import TQC
+
+        push_run = request.getfixturevalue("push_run_sb3")
     policy = make_policy(f"tqc:{push_run.model}", "push")
     assert policy.config()["reward"] == "sparse" and policy.name == "tqc"
     env = make_env("push", "sparse")
@@ -109,6 +137,7 @@ def test_zip_is_a_policy_acting_like_sb3s_own_loader(push_run):
         env.close()
     assert ours.shape == (2, 3) and ours.dtype == np.float32
     np.testing.assert_allclose(ours, theirs, atol=1e-6)
+    assert np.abs(ours).max() > 0  # a trained actor, not zeros
     assert np.abs(ours).max() <= 1.0
     best = make_policy(f"tqc:{push_run.best_model}", "push")
     result = evaluate(best, "push", "sparse", episodes=2, progress=False)
@@ -176,6 +205,16 @@ def test_bad_zip_one_line_exit_2(
     assert_usage_error(argv, message)
 
 
+def test_a_zip_of_the_other_backend_is_refused_in_one_line(push_run, push_run_sb3):
+    from gcdt.policies.tqc import TQCPolicy
+
+    with pytest.raises(GcdtError, match="written by the sbx backend, not sb3: load it with"):
+        TQCPolicy(push_run.model, "push", backend="sb3")
+    with pytest.raises(GcdtError, match="written by the sb3 backend, not sbx"):
+        TQCPolicy(push_run_sb3.model, "push", backend="sbx")
+    assert TQCPolicy(push_run.model, "push", backend="sbx").meta["backend"] == "sbx"
+
+
 def test_foreign_tqc_zip_for_its_own_task_is_a_policy(foreign_zips):
     policy = make_policy(f"tqc:{foreign_zips / 'tqc_reach.zip'}", "reach")
     assert policy.config()["reward"] is None  # no gcdt metadata: runs under either reward
@@ -188,6 +227,10 @@ def test_foreign_tqc_zip_for_its_own_task_is_a_policy(foreign_zips):
         (["--steps", "0"], "expected a positive integer, got 0"),
         (["--steps", "-5"], "expected a positive integer, got -5"),
         (["--eval-episodes", "0"], "expected a positive integer, got 0"),
+        (["--backend", "tf"], "--backend: invalid choice: 'tf' (choose from 'sb3', 'sbx')"),
+        (["--n-envs", "0"], "expected a positive integer, got 0"),
+        (["--stop-at", "1.5"], "expected a success rate in (0, 1], got 1.5"),
+        (["--device", "cuda"], "the sbx backend runs on JAX's default device"),
     ],
 )
 def test_bad_train_input_exit_2_nothing_written(assert_usage_error, tmp_path, extra, message):
@@ -206,9 +249,35 @@ def test_train_refuses_a_folder_holding_a_run(assert_usage_error, push_run, tmp_
     assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before
 
 
-def test_training_is_reproducible(tmp_path):
+def test_sbx_refuses_a_config_it_cannot_run(tmp_path):
+    import dataclasses
+
+    cfg = dataclasses.replace(load_tqc_config("cpu", "reach"), n_critics=3)
+    with pytest.raises(GcdtError, match="the sbx backend's TQC has exactly 2 critics"):
+        train_tqc("reach", "sparse", cfg, tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
+
+
+def test_too_few_warm_up_steps_for_the_envs_are_refused(tmp_path):
+    cfg = load_tqc_config("cpu", "reach").with_budget(learning_starts=100, n_envs=8)
+    with pytest.raises(GcdtError, match="learning_starts \\(100\\) must be at least n_envs x"):
+        train_tqc("reach", "sparse", cfg, tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
+
+
+def _weights(policy):
+    """A TQC actor's weights as numpy arrays, whichever backend trained it."""
+    if hasattr(policy, "actor_state"):  # SBX: a pytree of JAX arrays
+        import jax
+
+        return [np.asarray(w) for w in jax.tree_util.tree_leaves(policy.actor_state.params)]
+    return [w.numpy() for w in policy.state_dict().values()]
+
+
+@pytest.mark.parametrize(("backend", "n_envs"), [("sbx", 4), ("sb3", 1)])
+def test_training_is_reproducible(tmp_path, backend, n_envs):
     cfg = load_tqc_config("cpu", "reach").with_budget(
-        steps=150, learning_starts=50, batch_size=16, net_arch=[16]
+        steps=320, learning_starts=200, batch_size=16, net_arch=[16], backend=backend, n_envs=n_envs
     )
     weights = []
     for run in ("a", "b"):
@@ -218,9 +287,10 @@ def test_training_is_reproducible(tmp_path):
             cfg,
             tmp_path / run,
             seed=3,
-            eval_every=150,
+            eval_every=320,
             eval_episodes=1,
             progress=False,
         )
-        weights.append(make_policy(f"tqc:{result.model}", "reach").sb3_policy.state_dict())
-    assert all(np.array_equal(weights[0][k], weights[1][k]) for k in weights[0])
+        weights.append(_weights(make_policy(f"tqc:{result.model}", "reach").sb3_policy))
+    assert len(weights[0]) >= 4
+    assert all(np.array_equal(a, b) for a, b in zip(*weights, strict=True))

@@ -1,12 +1,17 @@
 """TQC+HER, the paper's online baseline and the source of its expert datasets.
 
-sb3-contrib's `TQC` with Stable-Baselines3's `HerReplayBuffer` on one panda-gym env. The
-hyperparameters live in `tqc_her.yaml` next to this file (`paper` = rl-baselines3-zoo's
-her-defaults); a config or a profile may change budget-related values only, and every run
-records what it changed. During training the project's own evaluator measures the current
-policy every `eval_every` env steps (success rate and return -> `eval.csv`, for learning
-curves); the best and the last model are saved as SB3 zips that carry the task, reward and
-config they were trained with, and `run.json` records the wall-clock time and env steps/s.
+TQC with Stable-Baselines3's `HerReplayBuffer` on panda-gym, in one of two implementations
+by the same maintainers (the `backend`): `sb3` is sb3-contrib's PyTorch TQC, the loop
+rl-baselines3-zoo runs; `sbx` is SBX's JAX TQC, whose whole gradient step is one compiled
+function, ~3x faster on a CPU (`python benchmarks/tqc_her.py throughput`). `n_envs` envs step
+side by side and each loop iteration takes `n_envs` gradient steps, so the updates per env
+step stay the zoo's. The hyperparameters live in `tqc_her.yaml` next to this file (`paper` =
+rl-baselines3-zoo's her-defaults); a config or a profile may change budget and loop values
+only, and every run records what it changed. During training the project's own evaluator
+measures the current policy every `eval_every` env steps (success rate and return ->
+`eval.csv`, for learning curves); the best and the last model are saved as SB3 zips that
+carry the task, reward, config and backend they were trained with, and `run.json` records
+the wall-clock time and env steps/s.
 
 Output folder: `model.zip` (last), `best_model.zip`, `eval.csv`, `run.json`.
 """
@@ -29,8 +34,13 @@ from gcdt.paths import atomic_write, write_json_atomic
 from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_now
 
 CONFIG_FILE = Path(__file__).with_name("tqc_her.yaml")
-#: Values a config other than `paper`, or a profile, may change: the compute budget only.
+#: Values a config other than `paper`, or a profile, may change: the compute budget...
 BUDGET_KEYS = ("steps", "net_arch", "batch_size", "buffer_size", "learning_starts")
+#: ...and the training loop, which leaves the algorithm and its updates per env step alone.
+LOOP_KEYS = ("backend", "n_envs")
+CHANGEABLE_KEYS = (*BUDGET_KEYS, *LOOP_KEYS)
+#: backend -> (the module its TQC comes from, what it is).
+BACKENDS = {"sb3": ("sb3_contrib", "sb3-contrib, PyTorch"), "sbx": ("sbx", "SBX, JAX")}
 #: A run's files: the last and the best model, the learning curve, and the record written last.
 MODEL_ZIP, BEST_MODEL_ZIP = "model.zip", "best_model.zip"
 EVAL_CSV, RUN_JSON = "eval.csv", "run.json"
@@ -67,16 +77,18 @@ class TQCConfig:
     n_critics: int
     n_sampled_goal: int  # HER: relabelled goals per real one
     goal_selection_strategy: str  # HER: "future", "final" or "episode"
-    #: Budget values this config changed relative to `paper`: {key: [paper, this]}.
+    backend: str  # "sb3" or "sbx" (see BACKENDS)
+    n_envs: int  # envs stepped side by side; gradient_steps are taken per env step
+    #: Budget and loop values this config changed relative to `paper`: {key: [paper, this]}.
     overrides: dict[str, list[Any]] = field(default_factory=dict)
 
     def with_budget(self, **changes: Any) -> TQCConfig:
-        """This config with budget values changed (e.g. by `--steps` or a profile), recorded."""
-        unknown = sorted(set(changes) - set(BUDGET_KEYS))
+        """This config with budget or loop values changed (by `--steps`, a profile), recorded."""
+        unknown = sorted(set(changes) - set(CHANGEABLE_KEYS))
         if unknown:
             raise GcdtError(
-                f"{', '.join(unknown)} is not a budget value; a TQC+HER config may change "
-                f"only {', '.join(BUDGET_KEYS)}"
+                f"{', '.join(unknown)} is not a budget or loop value; a TQC+HER config may "
+                f"change only {', '.join(CHANGEABLE_KEYS)}"
             )
         values = {k: _budget_value(k, v) for k, v in changes.items()}
         paper = load_tqc_config("paper", self.task) if self.name != "paper" else self
@@ -98,7 +110,14 @@ def _plain(value: Any) -> Any:
 
 
 def _budget_value(key: str, value: Any) -> Any:
-    """A checked budget value: positive integers, or a non-empty tuple of them for net_arch."""
+    """A checked budget or loop value: a known backend, positive integers, or for net_arch a
+    non-empty tuple of them."""
+    if key == "backend":
+        if value not in BACKENDS:
+            raise GcdtError(
+                f"unknown TQC+HER backend {value!r}: expected one of {', '.join(BACKENDS)}"
+            )
+        return value
     if key == "net_arch":
         layers = tuple(value) if isinstance(value, list | tuple) else ()
         if not layers or not all(isinstance(n, int) and n > 0 for n in layers):
@@ -177,13 +196,15 @@ def train_tqc(
     eval_every: int | None = None,
     eval_episodes: int = 20,
     device: str = "auto",
+    stop_at: float | None = None,
     progress: bool = True,
     command: str | None = None,
 ) -> TQCResult:
     """Train TQC+HER on `task` with `reward`; write the run's files to `out_dir`.
 
     The current policy is evaluated with `gcdt.evaluation.evaluate` on `eval_episodes`
-    episodes every `eval_every` env steps (default: 10 times per run) and once at the end.
+    episodes every `eval_every` env steps (default: 10 times per run) and once at the end;
+    with `stop_at`, training ends at the first evaluation whose success rate reaches it.
     """
     spec = get_task(task)
     check_reward(reward)
@@ -194,46 +215,30 @@ def train_tqc(
         _budget_value(name, value)
     if not isinstance(seed, int) or seed < 0:
         raise GcdtError(f"seed must be a non-negative integer, got {seed!r}")
+    if stop_at is not None and not 0 < stop_at <= 1:
+        raise GcdtError(f"stop_at is a success rate in (0, 1], got {stop_at!r}")
     out = Path(out_dir)
     taken = [name for name in RUN_FILES if (out / name).exists()]
     if taken:
         raise GcdtError(f"{out} already holds a TQC+HER run ({taken[0]}); choose another --out")
 
-    from sb3_contrib import TQC  # heavy imports only once the input is known to be good
-    from stable_baselines3 import HerReplayBuffer
-
-    from gcdt.envs import SeededResets, make_env
-
+    _check_loop(cfg, device)
     out.mkdir(parents=True, exist_ok=True)
-    model = TQC(
-        "MultiInputPolicy",
-        SeededResets(make_env(spec.name, reward), seed),  # reproducible training episodes
-        buffer_size=cfg.buffer_size,
-        batch_size=cfg.batch_size,
-        gamma=cfg.gamma,
-        learning_rate=cfg.learning_rate,
-        tau=cfg.tau,
-        learning_starts=cfg.learning_starts,
-        ent_coef=cfg.ent_coef,
-        train_freq=cfg.train_freq,
-        gradient_steps=cfg.gradient_steps,
-        replay_buffer_class=HerReplayBuffer,
-        replay_buffer_kwargs={
-            "n_sampled_goal": cfg.n_sampled_goal,
-            "goal_selection_strategy": cfg.goal_selection_strategy,
-        },
-        policy_kwargs={"net_arch": list(cfg.net_arch), "n_critics": cfg.n_critics},
-        seed=seed,
-        device=device,
-        verbose=0,
-    )
+    model = _build(cfg, spec.name, reward, seed, device)
     # Travels inside every saved zip: what `TQCPolicy` checks a model against.
-    model.gcdt = {"task": spec.name, "reward": reward, "config": cfg.name, "seed": seed}
+    model.gcdt = {
+        "task": spec.name,
+        "reward": reward,
+        "config": cfg.name,
+        "seed": seed,
+        "backend": cfg.backend,
+    }
     evaluator = _PeriodicEvaluation(
-        model, out, spec.name, reward, eval_every, eval_episodes, seed + EVAL_SEED_OFFSET
+        model, out, spec.name, reward, eval_every, eval_episodes, seed + EVAL_SEED_OFFSET, stop_at
     )
     started = time.perf_counter()
     model.learn(cfg.steps, callback=evaluator.callback(cfg.steps, cfg.learning_starts, progress))
+    # model.learn stops at the first multiple of n_envs >= steps, or at `stop_at`.
     learning_rate = evaluator.learning_rate()
     if evaluator.last_step != model.num_timesteps:
         evaluator.run()  # the final policy is always measured
@@ -260,10 +265,11 @@ def train_tqc(
             "seed": seed,
             "config": cfg.to_dict(),
             "overrides": cfg.overrides,
-            "device": str(model.device),
+            "device": _device_name(model, cfg.backend),
             "eval_every": eval_every,
             "eval_episodes": eval_episodes,
             "eval_seed": seed + EVAL_SEED_OFFSET,
+            "stop_at": stop_at,
             "env_steps": result.env_steps,
             "train_seconds": round(train_seconds, 2),
             "eval_seconds": round(evaluator.seconds, 2),
@@ -275,16 +281,103 @@ def train_tqc(
             "command": command,
             "created": utc_now(),
             "git_commit": git_commit(),
-            "versions": package_versions((*TRACKED_PACKAGES, "stable-baselines3", "sb3-contrib")),
+            "versions": package_versions((*TRACKED_PACKAGES, *TQC_PACKAGES[cfg.backend])),
         },
     )
     return result
 
 
+#: The packages a backend's runs record the versions of.
+TQC_PACKAGES = {
+    "sb3": ("stable-baselines3", "sb3-contrib"),
+    "sbx": ("stable-baselines3", "sbx-rl", "jax"),
+}
+
+
+def _check_loop(cfg: TQCConfig, device: str) -> None:
+    """Refuse what the chosen backend or loop cannot run, before anything is written."""
+    # HER samples only from finished episodes, and n envs finish their first ones together.
+    first_episodes = cfg.n_envs * get_task(cfg.task).max_episode_steps
+    if cfg.learning_starts < first_episodes:
+        raise GcdtError(
+            f"learning_starts ({cfg.learning_starts}) must be at least n_envs x episode length "
+            f"= {first_episodes}: HER needs a finished episode before its first gradient step; "
+            "raise learning_starts or lower n_envs"
+        )
+    if cfg.backend == "sbx" and cfg.n_critics != 2:
+        raise GcdtError(
+            f"the sbx backend's TQC has exactly 2 critics, the config asks for {cfg.n_critics}; "
+            "use backend sb3 for another number"
+        )
+    if cfg.backend == "sbx" and device not in ("auto", "cpu"):
+        raise GcdtError(
+            f"the sbx backend runs on JAX's default device; --device {device} applies to "
+            "backend sb3 only (for a GPU with sbx, install jax's CUDA wheel)"
+        )
+
+
+def _build(cfg: TQCConfig, task: str, reward: str, seed: int, device: str) -> Any:
+    """The backend's TQC with HER on `cfg.n_envs` envs, episode seeds shared out between them."""
+    from stable_baselines3 import HerReplayBuffer
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from gcdt.envs import SeededResets, make_env
+
+    if cfg.backend == "sbx":
+        from sbx import TQC
+    else:
+        from sb3_contrib import TQC
+
+    # Env k plays episodes k, k + n, k + 2n, ... of the run's seed: the instances a one-env
+    # run would play, and reproducible whatever order the envs finish in.
+    envs = DummyVecEnv(
+        [
+            lambda k=k: SeededResets(make_env(task, reward), seed, offset=k, stride=cfg.n_envs)
+            for k in range(cfg.n_envs)
+        ]
+    )
+    return TQC(
+        "MultiInputPolicy",
+        envs,
+        buffer_size=cfg.buffer_size,
+        batch_size=cfg.batch_size,
+        gamma=cfg.gamma,
+        learning_rate=cfg.learning_rate,
+        tau=cfg.tau,
+        learning_starts=cfg.learning_starts,
+        ent_coef=cfg.ent_coef,
+        train_freq=cfg.train_freq,
+        # One loop iteration steps every env once: as many gradient steps as env steps.
+        gradient_steps=cfg.gradient_steps * cfg.n_envs,
+        replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs={
+            "n_sampled_goal": cfg.n_sampled_goal,
+            "goal_selection_strategy": cfg.goal_selection_strategy,
+        },
+        policy_kwargs={"net_arch": list(cfg.net_arch), "n_critics": cfg.n_critics},
+        seed=seed,
+        device=device,
+        verbose=0,
+    )
+
+
+def _device_name(model: Any, backend: str) -> str:
+    if backend == "sbx":
+        import jax
+
+        return jax.default_backend()
+    return str(model.device)
+
+
 def _save_zip(model: Any, path: Path) -> None:
-    """`model.save` through a temp file and a rename: a reader never sees half a zip."""
+    """`model.save` through a temp file and a rename: a reader never sees half a zip.
+
+    SBX pickles its policy whole and again its actor and critic, which the policy holds:
+    leaving out the copies halves the zip.
+    """
+    copies = ["actor", "qf"] if model.gcdt["backend"] == "sbx" else None
     with atomic_write(path, binary=True) as f:
-        model.save(f)
+        model.save(f, exclude=copies)
 
 
 class _PeriodicEvaluation:
@@ -299,12 +392,15 @@ class _PeriodicEvaluation:
         every: int,
         episodes: int,
         seed: int,
+        stop_at: float | None = None,
     ) -> None:
         self.model, self.out, self.task, self.reward = model, out, task, reward
         self.every, self.episodes, self.seed = every, episodes, seed
         self.rows: list[dict[str, Any]] = []
         self.best: tuple[float, float] = (-np.inf, -np.inf)  # (success rate, mean return)
         self.best_row: dict[str, Any] | None = None
+        self.stop_at = stop_at
+        self.evaluations = 0  # periodic evaluations so far
         self.seconds = 0.0  # time spent evaluating, excluded from the training speed
         self.last_step = -1
         self.started = time.perf_counter()
@@ -331,6 +427,7 @@ class _PeriodicEvaluation:
             "episodes": summary["episodes"],
         }
         self.rows.append(row)
+        self.evaluations = row["env_steps"] // self.every
         self.last_step = row["env_steps"]
         with open(self.out / EVAL_CSV, "a", newline="") as f:
             csv.DictWriter(f, EVAL_FIELDS).writerow(row)
@@ -339,6 +436,9 @@ class _PeriodicEvaluation:
             self.best, self.best_row = score, row
             _save_zip(self.model, self.out / BEST_MODEL_ZIP)
         self.seconds += time.perf_counter() - began
+
+    def reached_target(self) -> bool:
+        return self.stop_at is not None and self.rows[-1]["success_rate"] >= self.stop_at
 
     def mark_learning_start(self) -> None:
         self.learning_mark = (self.model.num_timesteps, time.perf_counter(), self.seconds)
@@ -364,11 +464,16 @@ class _PeriodicEvaluation:
 
             def _on_step(self) -> bool:
                 self.bar.update(self.training_env.num_envs)
-                if self.num_timesteps == max(learning_starts, 1):  # gradient steps follow
+                # num_timesteps grows by n_envs per call: the first call at or past a mark.
+                # From the second iteration with gradient steps: the first compiles SBX's update.
+                started = learning_starts + 2 * self.training_env.num_envs
+                if evaluation.learning_mark is None and self.num_timesteps >= started:
                     evaluation.mark_learning_start()
-                if self.num_timesteps % evaluation.every == 0:
+                if self.num_timesteps // evaluation.every > evaluation.evaluations:
                     evaluation.run()
                     self.bar.set_postfix(success=evaluation.rows[-1]["success_rate"])
+                    if evaluation.reached_target():
+                        return False  # stop training: the target success rate is reached
                 return True
 
             def _on_training_end(self) -> None:

@@ -28,7 +28,8 @@ def collect(
 ) -> Dataset:
     """Collect the first episodes of a seeded run whose lengths add up to >= `transitions`.
 
-    The dataset holds episodes `0..k-1` of the run (each reset with `episode_seed(seed, j)`),
+    The dataset holds episodes `0..k-1` of the run (each reset with `episode_seed(seed, j,
+    stream)`, stream "random-collection" for the random policy and "collection" otherwise),
     with `k` the smallest count reaching `transitions`, so it exceeds the request by less than
     one episode and is bit-for-bit the same for the same `seed` and `n_envs`. Episodes that
     other envs had started when the last needed one finished are discarded.
@@ -39,7 +40,10 @@ def collect(
     spec = get_task(task)
     if not isinstance(transitions, int | np.integer) or transitions < 1:
         raise GcdtError(f"transitions must be a positive integer, got {transitions!r}")
-    rollout = VectorRollout(policy, task, reward, n_envs, seed)  # validates the rest
+    # Random data and expert data come from seed streams of their own, and evaluation from
+    # another one: no collected episode replays another collection's or an evaluation's.
+    stream = "random-collection" if policy.name == "random" else "collection"
+    rollout = VectorRollout(policy, task, reward, n_envs, seed, stream=stream)
 
     running: list[dict[str, list[np.ndarray]]] = [_empty_episode() for _ in range(n_envs)]
     finished: dict[int, dict[str, np.ndarray]] = {}

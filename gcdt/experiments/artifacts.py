@@ -29,8 +29,9 @@ from gcdt.baselines.tqc_her import (
     train_tqc,
 )
 from gcdt.data import Dataset, collect, load_dataset, mix, subset
-from gcdt.experiments.grid import OFFLINE_METHODS, DataSpec, RunSpec, TQCSpec
-from gcdt.paths import artifacts_dir
+from gcdt.errors import GcdtError
+from gcdt.experiments.grid import OFFLINE_METHODS, DataSpec, RunSpec, TQCSpec, file_digest
+from gcdt.paths import REPO_ROOT, artifacts_dir
 
 if TYPE_CHECKING:
     from gcdt.policies import Policy
@@ -106,10 +107,16 @@ def dataset(spec: DataSpec) -> Dataset:
 
 def collecting_policy(spec: DataSpec) -> tuple[Policy, str]:
     """The policy that collects base dataset `spec`, and the reward type it is shown."""
-    from gcdt.policies import make_policy
+    from gcdt.policies import TQC_PREFIX, make_policy
 
     if spec.expert == "tqc":
         return make_policy(f"tqc:{tqc_agent(spec.expert_tqc)}", spec.task), spec.expert_tqc.reward
+    if spec.expert.startswith(TQC_PREFIX):  # a published agent, checked to be the planned one
+        path = REPO_ROOT / spec.expert.removeprefix(TQC_PREFIX)
+        if file_digest(path) != spec.expert_digest:
+            raise GcdtError(f"{path} changed since this grid was planned; plan it again")
+        policy = make_policy(f"{TQC_PREFIX}{path}", spec.task)
+        return policy, policy.reward or "sparse"
     noise = {"noise_std": spec.expert_noise} if spec.expert_noise else {}  # scripted only
     return make_policy(spec.expert, spec.task, **noise), "sparse"
 

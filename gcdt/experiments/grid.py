@@ -12,13 +12,17 @@ import dataclasses
 import hashlib
 import json
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+from gcdt.errors import GcdtError
 from gcdt.experiments.profiles import Profile
+from gcdt.paths import REPO_ROOT
 
 #: Bump when the meaning of a spec field or of a result file changes: old results re-run.
-#: 3: data specs name the scripted experts' action noise.
-RUN_SCHEMA = 3
+#: 3: data specs name the scripted experts' action noise. 4: TQC+HER's configs run SBX's TQC
+#: on 8 envs (tqc_her.yaml's loop values).
+RUN_SCHEMA = 4
 SECTIONS = ("table1", "rq4", "rq5", "ablation")
 #: Method name -> (trainer method, goal conditioning); `tqc` is the online baseline.
 OFFLINE_METHODS = {
@@ -70,6 +74,9 @@ class DataSpec:
     base_size: int
     seed: int
     collect_envs: int
+    #: With expert "tqc:PATH" (a published agent): the zip's content hash, so that another
+    #: agent at the same path makes other data.
+    expert_digest: str | None = None
 
     def key(self) -> str:
         return content_key({"data": dataclasses.asdict(self), "schema": RUN_SCHEMA})
@@ -93,6 +100,7 @@ class DataSpec:
                 expert="random",
                 expert_tqc=None,
                 expert_noise=0.0,
+                expert_digest=None,
             )
         return dataclasses.replace(self, size=self.base_size, expert_ratio=1.0)
 
@@ -177,18 +185,30 @@ def expert_tqc_spec(profile: Profile, task: str) -> TQCSpec:
 
 
 def data_spec(profile: Profile, task: str, size: int, expert_ratio: float) -> DataSpec:
-    expert_tqc = expert_tqc_spec(profile, task) if profile.expert == "tqc" else None
+    expert, noise, digest = profile.expert, float(profile.expert_noise), None
+    if task in profile.expert_agents:  # a published agent collects this task's expert data
+        expert, noise = f"tqc:{profile.expert_agents[task]}", 0.0
+        digest = file_digest(REPO_ROOT / profile.expert_agents[task])
+    expert_tqc = expert_tqc_spec(profile, task) if expert == "tqc" else None
     return DataSpec(
         task,
         int(size),
         float(expert_ratio),
-        profile.expert,
+        expert,
         expert_tqc,
-        float(profile.expert_noise),
+        noise,
         profile.dataset_size,
         profile.data_seed,
         profile.collect_envs,
+        digest,
     )
+
+
+def file_digest(path: Path) -> str:
+    """The content hash of a published file the grid depends on (16 hex digits)."""
+    if not path.is_file():
+        raise GcdtError(f"no published expert agent at {path}: fix the profile's expert_agents")
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
 
 
 def run_spec(

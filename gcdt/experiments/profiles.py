@@ -12,6 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+from gcdt.baselines.tqc_her import BACKENDS, load_tqc_config
 from gcdt.envs import REWARDS
 from gcdt.errors import GcdtError
 
@@ -42,6 +43,9 @@ class Profile:
     # so the data holds no recovery from a slip, and each phase of the task comes at an
     # almost fixed return-to-go (results/quick_checks/README.md).
     expert_noise: float = 0.0
+    # Per task, a published TQC+HER zip (path from the repository root) that collects that
+    # task's expert data instead of `expert`, e.g. results/experts/tqc_push_sparse/model.zip.
+    expert_agents: dict[str, str] = field(default_factory=dict)
     dataset_size: int = 1_000_000  # transitions of the full expert data (Table 1, RQ5)
     data_seed: int = 0  # seed of every collection, subset and mixture
     collect_envs: int = 1  # env processes per collection
@@ -143,7 +147,7 @@ SMOKE = dataclasses.replace(
     eval_timesteps=100,
     eval_envs=1,  # starting env processes would cost more than these 100 steps
     tqc_steps=200,
-    tqc_budget={"learning_starts": 100, "batch_size": 64, "net_arch": [32, 32]},
+    tqc_budget={"learning_starts": 100, "batch_size": 64, "net_arch": [32, 32], "n_envs": 2},
     tqc_eval_every=200,
     tqc_eval_episodes=2,
     table1_tqc=Scope(),  # cheap at this size: every stage runs on every task
@@ -175,6 +179,8 @@ def deviations(profile: Profile) -> list[str]:
             f"expert data from the {p.expert} experts (gcdt.policies.scripted{noise}) instead "
             "of converged TQC+HER agents"
         )
+    for task, path in p.expert_agents.items():
+        out.append(f"{task}'s expert data collected by the published TQC+HER agent {path}")
     if p.dataset_size != paper.dataset_size:
         out.append(
             f"{p.dataset_size:,} transitions of expert (and of random) data instead of "
@@ -208,6 +214,13 @@ def deviations(profile: Profile) -> list[str]:
             "TQC+HER with changed budget values ("
             + ", ".join(f"{k} {v}" for k, v in changes.items())
             + ") instead of rl-baselines3-zoo's her-defaults"
+        )
+    loop = load_tqc_config(p.tqc_config, "push").with_budget(**p.tqc_budget)
+    if (loop.backend, loop.n_envs) != ("sb3", 1):
+        out.append(
+            f"TQC+HER trained with the {loop.backend} backend ({BACKENDS[loop.backend][1]}) on "
+            f"{loop.n_envs} envs side by side (the same algorithm and gradient steps per env "
+            "step) instead of sb3-contrib's TQC on one env, as rl-baselines3-zoo runs it"
         )
     if p.tqc_steps != paper.tqc_steps:
         out.append(

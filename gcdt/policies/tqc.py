@@ -1,6 +1,8 @@
 """A trained TQC+HER agent (an SB3 zip) as a policy: `gcdt evaluate --policy tqc:PATH`.
 
-Only the policy network is rebuilt from the zip (no replay buffer, no env), and it acts
+Zips of both backends load: sb3-contrib's (PyTorch weights, the policy rebuilt from them)
+and SBX's (the JAX policy pickled whole). Only the policy is loaded (no replay buffer, no
+env), and it acts
 deterministically (the mean action), as rl-baselines3-zoo evaluates. Zips written by
 `gcdt tqc train` carry the task and reward they were trained with, and are checked against
 the ones asked for (the reward by the rollout, as for every trained policy); any SB3 TQC zip is
@@ -35,11 +37,12 @@ class TQCPolicy(Policy):
         *,
         meta: Mapping[str, Any] | None = None,
         device: str = "cpu",
+        backend: str | None = None,
     ) -> None:
         super().__init__(task)
         if isinstance(model, str | Path):
             self.path: str | None = str(model)
-            self.sb3_policy, meta = _load_zip(Path(model), device)
+            self.sb3_policy, meta = _load_zip(Path(model), device, backend)
         else:
             self.path, self.sb3_policy = None, model
         self.meta = dict(meta or {})
@@ -87,27 +90,52 @@ class TQCPolicy(Policy):
         }
 
 
-def _load_zip(path: Path, device: str) -> tuple[Any, dict[str, Any]]:
-    """The policy network of the SB3 zip at `path`, and the gcdt metadata it carries."""
+def _load_zip(path: Path, device: str, backend: str | None) -> tuple[Any, dict[str, Any]]:
+    """The policy of the TQC zip at `path` (of `backend`, if given), and its gcdt metadata."""
     from stable_baselines3.common.save_util import load_from_zip_file
 
     if not path.is_file():
         raise GcdtError(f"no TQC model at {path}: expected the .zip written by `gcdt tqc train`")
     try:
         data, params, _ = load_from_zip_file(path, device=device)
-        policy = data["policy_class"](
-            data["observation_space"],
-            data["action_space"],
-            lambda _: 0.0,  # learning-rate schedule: the optimiser is never stepped here
-            **data.get("policy_kwargs", {}),
-        )
-        policy.load_state_dict(params["policy"])
+        written_by = _backend_of(data["policy_class"])
+        if written_by is None:
+            raise GcdtError(f"{path} holds a {data['policy_class'].__name__}, not a TQC policy")
+        if backend is not None and written_by != backend:
+            raise GcdtError(
+                f"{path} was written by the {written_by} backend, not {backend}: load it with "
+                f"backend {written_by}, or train a model with --backend {backend}"
+            )
+        if written_by == "sbx":  # SBX pickles its whole policy, parameters included
+            policy = data["policy"]
+        else:
+            policy = data["policy_class"](
+                data["observation_space"],
+                data["action_space"],
+                lambda _: 0.0,  # learning-rate schedule: the optimiser is never stepped here
+                **data.get("policy_kwargs", {}),
+            )
+            policy.load_state_dict(params["policy"])
+            policy.to(device).set_training_mode(False)
+    except GcdtError:
+        raise
+    except ModuleNotFoundError as err:
+        raise GcdtError(
+            f"{path} needs the Python package {err.name!r} to load; install the project's "
+            "environment (make install)"
+        ) from None
     except (zipfile.BadZipFile, ValueError, KeyError, TypeError, RuntimeError, EOFError) as err:
         raise GcdtError(
             f"{path} is not a readable SB3 TQC model zip ({type(err).__name__}: {err}); "
             "pass the model.zip or best_model.zip that `gcdt tqc train` wrote"
         ) from None
-    if not type(policy).__module__.startswith("sb3_contrib.tqc"):
-        raise GcdtError(f"{path} holds a {type(policy).__name__}, not a TQC policy")
-    policy.to(device).set_training_mode(False)
     return policy, dict(data.get("gcdt") or {})
+
+
+def _backend_of(policy_class: Any) -> str | None:
+    """ "sb3" or "sbx" for a TQC policy class, None for anything else."""
+    module = getattr(policy_class, "__module__", "")
+    for backend, prefix in (("sb3", "sb3_contrib.tqc"), ("sbx", "sbx.tqc")):
+        if module.startswith(prefix):
+            return backend
+    return None

@@ -17,6 +17,7 @@ from typing import Any
 
 from gcdt.baselines.tqc_her import BACKENDS as TQC_BACKENDS
 from gcdt.baselines.tqc_her import RUN_FILES, tqc_config_names
+from gcdt.data.collect import LABELS
 from gcdt.envs import REWARDS, TASKS
 from gcdt.errors import GcdtError
 from gcdt.evaluation import DEFAULT_TIMESTEPS, EvaluationConfig
@@ -293,6 +294,13 @@ def _collect_parser(sub: argparse._SubParsersAction) -> None:
     co.add_argument("--seed", type=_int_at_least(0), default=0)
     co.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
     co.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
+    co.add_argument(
+        "--labels",
+        choices=LABELS,
+        default="executed",
+        help="the action recorded: executed (what the env ran) or clean (the expert's action "
+        "before its noise, as in DART)",
+    )
     co.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     co.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     co.set_defaults(run=_collect)
@@ -312,6 +320,7 @@ def _collect(args: argparse.Namespace) -> int:
         n_envs=args.envs,
         # Both rewards are stored; a trained agent runs under the one it was trained with.
         reward=policy.config().get("reward") or "sparse",
+        labels=args.labels,
         progress=not args.no_progress,
     )
     dataset = dataset.with_metadata(command=_command(args))

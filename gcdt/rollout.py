@@ -26,7 +26,8 @@ class VectorStep:
 
     episode: np.ndarray  # int64, the episode index each env was running
     obs: dict[str, np.ndarray]  # the observation the action was taken in
-    action: np.ndarray  # float32 [n_envs, action_dim]
+    action: np.ndarray  # float32 [n_envs, action_dim], executed
+    intended: np.ndarray  # the action before the policy's own noise (`Policy.intended`)
     reward: np.ndarray  # the env's reward (of the rollout's reward type)
     next_obs: dict[str, np.ndarray]  # the observation after the step, before any reset
     terminated: np.ndarray  # bool
@@ -110,11 +111,13 @@ class VectorRollout:
         action = np.asarray(
             self.policy.predict(obs, self.episode_start, self.last_reward), dtype=np.float32
         )
+        intended = self.policy.intended
         next_obs, reward, terminated, truncated, info = self.envs.step(action)
         step = VectorStep(
             episode=self.episode.copy(),
             obs=obs,
             action=action,
+            intended=action if intended is None else np.asarray(intended, dtype=np.float32),
             reward=np.asarray(reward, dtype=np.float32),
             next_obs=next_obs,
             terminated=np.asarray(terminated, dtype=bool),

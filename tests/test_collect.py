@@ -75,7 +75,26 @@ def test_collection_is_bit_for_bit_reproducible():
     )
 
 
+def test_clean_labels_record_the_experts_action_and_the_env_runs_the_noisy_one():
+    """DART: with labels "clean", each state's action is the noise-free expert's action in that
+    state, while the states themselves are those the noisy execution visited."""
+    expert = ScriptedExpert("push", noise_std=0.2)
+    clean = collect(expert, "push", 120, seed=5, labels="clean", progress=False)
+    executed = collect(expert, "push", 120, seed=5, labels="executed", progress=False)
+    assert clean.metadata["labels"] == "clean" and executed.metadata["labels"] == "executed"
+    # The same noisy run (same seeds, same noise draws): same states, other actions.
+    np.testing.assert_array_equal(clean.arrays["observation"], executed.arrays["observation"])
+    assert not np.allclose(clean.actions, executed.actions)
+    obs = {k: clean.arrays[k] for k in ("observation", "desired_goal", "achieved_goal")}
+    noise_free = ScriptedExpert("push").predict(obs, np.zeros(len(clean), bool), np.zeros(0))
+    np.testing.assert_array_equal(clean.actions, noise_free)
+    # The executed actions are what the env ran: replaying them reproduces the observations.
+    np.testing.assert_array_equal(_replay(executed, "sparse")["observation"], obs["observation"])
+
+
 def test_bad_collection_arguments():
+    with pytest.raises(GcdtError, match="unknown action labels 'noisy': expected one of"):
+        collect(RandomPolicy("reach"), "reach", 10, labels="noisy")
     with pytest.raises(GcdtError, match="transitions must be a positive integer"):
         collect(RandomPolicy("reach"), "reach", 0)
     with pytest.raises(GcdtError, match="transitions must be a positive integer"):

@@ -11,10 +11,12 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gcdt.checkpoint import load_checkpoint
 from gcdt.data import load_dataset
+from gcdt.envs import episode_seed, make_env
 from gcdt.errors import GcdtError
 from gcdt.experiments import (
     PROFILES,
@@ -53,7 +55,9 @@ TINY = dataclasses.replace(
 
 
 def test_paper_profile_is_the_paper_and_others_list_their_deviations():
-    assert deviations(PROFILES["paper"]) == []
+    # The one deviation of `paper`: TQC+HER's loop, the algorithm and its budget unchanged.
+    (loop,) = deviations(PROFILES["paper"])
+    assert loop.startswith("TQC+HER trained with the sbx backend (SBX, JAX) on 8 envs")
     quick = deviations_text(get_profile("quick"))
     assert "1 seed per cell instead of 3" in quick
     assert "scripted experts" in quick and "instead of 1,000,000" in quick
@@ -79,6 +83,31 @@ def test_expert_noise_reaches_the_scripted_collections_only():
         dataclasses.replace(PROFILES["paper"], expert_noise=0.1)
     with pytest.raises(GcdtError, match="expert_noise must be >= 0"):
         dataclasses.replace(SMOKE, expert_noise=-0.1)
+
+
+def test_a_profile_whose_evaluation_seeds_collide_is_refused():
+    with pytest.raises(GcdtError, match="training seeds 0 and 100 would both be evaluated"):
+        dataclasses.replace(SMOKE, seeds=(0, 100), eval_seeds=2)
+    assert dataclasses.replace(SMOKE, seeds=(0, 1, 2), eval_seeds=5).eval_seeds == 5
+
+
+def test_bc_sees_as_many_samples_as_the_dt():
+    quick = get_profile("quick")
+    steps = {
+        (e.spec.method, e.spec.task): e.spec.train_steps
+        for e in build_grid(quick, only="table1")
+        if e.spec.method in ("gcdt", "bc")
+    }
+    for task, dt_steps in quick.train_steps.items():
+        assert steps["gcdt", task] == dt_steps and steps["bc", task] == 20 * dt_steps
+    paper_bc = next(
+        e.spec for e in build_grid(PROFILES["paper"], only="table1") if e.spec.method == "bc"
+    )
+    assert paper_bc.train_steps == 120 * 1_000_000 // 64  # 120 epochs over transitions
+    same_steps = dataclasses.replace(quick, bc_budget="steps")
+    assert "BC trained with as many gradient steps as the DT" in deviations_text(same_steps)
+    with pytest.raises(GcdtError, match="unknown BC budget rule 'epochs': expected one of"):
+        dataclasses.replace(quick, bc_budget="epochs")
 
 
 def test_paper_grid_shares_runs_between_sections():
@@ -152,6 +181,49 @@ def test_local_sweep_runs_every_run_once(local_sweep):
     assert len(again.skipped) == 7 and not again.done and not again.failed
 
 
+def _start(obs) -> tuple[float, ...]:
+    """An episode's instance: its goal and the object's (Reach: the gripper's) start position."""
+    return tuple(np.round(np.concatenate([obs["desired_goal"], obs["achieved_goal"]]), 5))
+
+
+def test_evaluation_never_replays_a_training_instance(local_sweep):
+    """Held out by construction: no evaluation episode of the grid starts from the goal and
+    object position of an episode any of its runs learnt from (expert or random data, or
+    TQC+HER's online training)."""
+    root, _ = local_sweep
+    env = make_env("reach", "sparse")
+    try:
+        trained = set()
+        for path in (root / "artifacts" / "grid" / "datasets").glob("*.npz"):
+            data = load_dataset(path)
+            starts = np.concatenate([[0], np.cumsum(data.episode_lengths)[:-1]])
+            trained |= {
+                _start({k: data.arrays[k][i] for k in ("desired_goal", "achieved_goal")})
+                for i in starts
+            }
+        tqc_episodes = TINY.tqc_steps // env.spec.max_episode_steps + 1
+        trained |= {
+            _start(env.reset(seed=episode_seed(seed, j, "tqc-training"))[0])
+            for seed in {TINY.data_seed, *TINY.seeds}
+            for j in range(tqc_episodes)
+        }
+        evaluated = set()
+        for path in (root / "runs").glob("*.json"):
+            for e in json.loads(path.read_text())["evaluations"]:
+                evaluated |= {
+                    _start(env.reset(seed=episode_seed(e["seed"], j))[0])
+                    for j in range(e["episodes"])
+                }
+        # The comparison can fail: an episode reset with an expert collection's seed starts
+        # where that collection's episode started.
+        replayed = _start(env.reset(seed=episode_seed(TINY.data_seed, 0, "collection"))[0])
+    finally:
+        env.close()
+    assert len(trained) >= 20 and evaluated  # (TINY evaluates 60 steps: one or two episodes)
+    assert replayed in trained
+    assert not trained & evaluated
+
+
 def test_ray_backend_writes_the_same_results(local_sweep, tmp_path, monkeypatch):
     pytest.importorskip("ray")
     monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))  # trains from scratch
@@ -189,7 +261,7 @@ def test_failing_run_is_recorded_and_the_others_complete(local_sweep, tmp_path, 
     assert not summary.ok and len(summary.failed) == 1 and len(summary.done) == 6
     failed = json.loads((tmp_path / f"{summary.failed[0]}.json").read_text())
     assert failed["status"] == "failed" and failed["spec"]["method"] == "tqc"
-    assert "gamma is not a budget value" in failed["error"]
+    assert "gamma is not a budget or loop value" in failed["error"]
     assert "Traceback" in failed["traceback"]
     retry = sweep(broken, store_root=tmp_path, workers=2, progress=False)
     assert retry.failed == summary.failed and len(retry.skipped) == 6  # failed runs re-run
@@ -278,3 +350,60 @@ def test_dry_run_lists_runs_with_state_and_cost(capsys):
     assert costs.estimate(long) - costs.estimate(short) == pytest.approx(
         990 * costs.rates["dt_step"]
     )
+
+
+#: The paper profile's structure at toy sizes: TQC+HER experts, expert data collected by a
+#: TQC agent, the authors' epoch budget (GC-DT: 120 epochs over episodes; BC: over
+#: transitions), TQC+HER for as many online steps as the data has transitions, evaluation.
+PAPER_IN_MINIATURE = dataclasses.replace(
+    PROFILES["paper"],
+    name="paper-miniature",
+    seeds=(0,),
+    dataset_size=150,
+    eval_timesteps=60,
+    tqc_budget={
+        "steps": 150,  # the expert's
+        "learning_starts": 50,
+        "batch_size": 16,
+        "net_arch": [16],
+        "buffer_size": 1000,
+        "n_envs": 1,
+    },
+    tqc_eval_every=150,
+    tqc_eval_episodes=1,
+    table1=ONE,
+    table1_tqc=ONE,
+    rq4=Scope(tasks=()),
+    rq5=Scope(tasks=()),
+    ablation=Scope(tasks=()),
+)
+
+
+def test_the_paper_profiles_path_runs_end_to_end_in_miniature(tmp_path, monkeypatch):
+    paper = PROFILES["paper"]
+    assert (paper.expert, paper.train_steps, paper.tqc_steps) == ("tqc", None, None)
+    monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))
+    summary = sweep(PAPER_IN_MINIATURE, store_root=tmp_path / "runs", workers=1, progress=False)
+    assert summary.ok and len(summary.done) == 3, summary.line()
+    results = {
+        r["spec"]["method"]: r
+        for r in map(json.loads, map(Path.read_text, (tmp_path / "runs").glob("*.json")))
+    }
+    assert set(results) == {"gcdt", "bc", "tqc"}
+    # The expert data came from a TQC+HER agent the grid trained first (the other agent is
+    # Table 1's baseline).
+    agents = {str(p) for p in (tmp_path / "artifacts" / "grid" / "tqc").glob("*/model.zip")}
+    collections = [
+        load_dataset(p) for p in (tmp_path / "artifacts" / "grid" / "datasets").glob("*.npz")
+    ]
+    (data,) = [d for d in collections if d.metadata["policy"]["name"] == "tqc"]
+    assert len(agents) == 2 and data.metadata["policy"]["path"] in agents and len(data) >= 150
+    # The epoch budget: GC-DT 120 epochs of ceil(episodes / 64) steps, BC 120 over transitions.
+    gcdt_run, bc_run, tqc_run = results["gcdt"], results["bc"], results["tqc"]
+    assert gcdt_run["spec"]["train_steps"] is None
+    assert gcdt_run["training"]["steps"] == 120 * -(-data.n_episodes // 64)
+    assert bc_run["training"]["steps"] == 120 * -(-150 // 64)
+    # TQC+HER: as many online steps as the data has transitions.
+    assert tqc_run["spec"]["tqc"]["steps"] == 150
+    for r in results.values():
+        assert r["evaluations"][0]["episodes"] >= 1

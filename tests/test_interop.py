@@ -140,6 +140,22 @@ def test_authors_import(make_dataset, tmp_path):
     assert sparse.metadata["reward_in_file"] == "sparse" and sparse.equal_data(imported)
 
 
+def test_authors_terminal_flags_follow_panda_gyms_rule(make_dataset, tmp_path):
+    """panda-gym v3 terminates on success only: a failed last step is a timeout, whatever the
+    file says, and the disagreement is counted, not hidden."""
+    ds = make_dataset("push", lengths=(4, 3, 5))
+    episodes = _authors_episodes(ds)
+    for ep in episodes:  # the file claims every episode terminated
+        ep["terminals"] = np.zeros_like(ep["terminals"])
+        ep["terminals"][-1] = 1.0
+    imported = import_authors(_pickle(tmp_path / "t.pkl", episodes), trust_pickle=True, task="push")
+    last = np.cumsum(imported.episode_lengths) - 1
+    success = imported.arrays["success"][last]
+    np.testing.assert_array_equal(imported.arrays["terminated"][last], success)
+    np.testing.assert_array_equal(imported.arrays["truncated"][last], ~success)
+    assert imported.metadata["terminal_flags_disagreeing"] == int((~success).sum()) > 0
+
+
 def test_authors_import_refusals(make_dataset, tmp_path):
     push = make_dataset("push", lengths=(4, 3))
     good = _authors_episodes(push)
@@ -153,6 +169,12 @@ def test_authors_import_refusals(make_dataset, tmp_path):
     with pytest.raises(GcdtError, match=r"matches: push, slide.*pass --task"):
         import_authors(path, trust_pickle=True)
     assert import_authors(path, trust_pickle=True, task="push").n_episodes == 2
+    wide = [
+        {**ep, "observations": {**ep["observations"], "observation": np.zeros((4, 7))}}
+        for ep in good
+    ]
+    with pytest.raises(GcdtError, match="observation width 7 and action width 3 match no panda"):
+        import_authors(_pickle(tmp_path / "wide.pkl", wide), trust_pickle=True)
     with pytest.raises(GcdtError, match="another task"):
         import_authors(path, trust_pickle=True, task="reach")
 

@@ -2,10 +2,13 @@
 
 Each episode: `observations` and `next_observations` (dicts of `observation`,
 `desired_goal`, `achieved_goal` arrays `[T, dim]`), `actions` `[T, action_dim]`, `rewards`
-`[T]`, `terminals` `[T]`. The format has no truncation flag and no success flag: an episode's
-last step is truncated when it is not terminal, and success is panda-gym's condition on the
-goals. Everything else is checked, not repaired: next observations must continue the
-observations, and the rewards must be panda-gym's sparse or dense reward of the goals.
+`[T]`, `terminals` `[T]`. The format has no truncation flag and no success flag: success is
+panda-gym's condition on the goals, and since panda-gym v3 terminates an episode only on
+success, an episode ends terminated when its last step is a success and truncated (timed
+out) otherwise, whatever the file's terminal flags say; the number of episodes whose flag
+disagreed is recorded in the metadata (`terminal_flags_disagreeing`). Everything else is
+checked, not repaired: next observations must continue the observations, and the rewards
+must be panda-gym's sparse or dense reward of the goals.
 """
 
 from __future__ import annotations
@@ -53,10 +56,11 @@ def import_authors(
         )
 
     spec = get_task(task) if task is not None else _infer_task(raw[0], path)
-    episodes, reward_type = [], None
+    episodes, reward_type, disagreeing = [], None, 0
     for e, ep in enumerate(raw):
         where = f"{path}: episode {e}"
-        converted, fits = _episode(ep, spec.name, where)
+        converted, fits, disagrees = _episode(ep, spec.name, where)
+        disagreeing += disagrees
         if reward_type is None:  # the first episode decides; all others must agree
             if not fits:
                 raise GcdtError(
@@ -72,6 +76,7 @@ def import_authors(
         "task": spec.name,
         "policy": {"name": "authors"},
         "reward_in_file": reward_type,
+        "terminal_flags_disagreeing": disagreeing,
         "file": str(path),
         "created": utc_now(),
     }
@@ -89,6 +94,12 @@ def _infer_task(ep: Any, path: Path):
             f"{path}: episodes must be dicts with keys {', '.join(_EPISODE_KEYS)}"
         ) from None
     matches = [t for t in TASKS.values() if (t.obs_dim, t.action_dim) == widths]
+    if not matches:
+        known = ", ".join(f"{t.name} {t.obs_dim}/{t.action_dim}" for t in TASKS.values())
+        raise GcdtError(
+            f"{path}: observation width {widths[0]} and action width {widths[1]} match no "
+            f"panda-gym task (observation/action widths: {known}); the file is not panda-gym data"
+        )
     if len(matches) != 1:
         names = ", ".join(t.name for t in matches) or "none"
         raise GcdtError(
@@ -98,8 +109,9 @@ def _infer_task(ep: Any, path: Path):
     return matches[0]
 
 
-def _episode(ep: Any, task: str, where: str) -> tuple[dict[str, Any], list[str]]:
-    """One episode in gcdt's layout, and the reward types its rewards are consistent with."""
+def _episode(ep: Any, task: str, where: str) -> tuple[dict[str, Any], list[str], bool]:
+    """One episode in gcdt's layout, the reward types its rewards are consistent with, and
+    whether the file's terminal flags disagree with panda-gym's (terminated on success only)."""
     if not isinstance(ep, dict) or not set(_EPISODE_KEYS) <= set(ep):
         raise GcdtError(f"{where}: expected a dict with keys {', '.join(_EPISODE_KEYS)}")
     try:
@@ -122,17 +134,19 @@ def _episode(ep: Any, task: str, where: str) -> tuple[dict[str, Any], list[str]]
             )
     recomputed = compute_rewards(nxt["achieved_goal"], nxt["desired_goal"], task)
     fits = [r for r in REWARDS if rewards_match(rewards, recomputed[r], r)]
-    truncated = np.zeros(length, dtype=bool)
-    truncated[-1] = not terminals[-1]
+    success = is_success(nxt["achieved_goal"], nxt["desired_goal"], task)
+    terminated, truncated = np.zeros(length, dtype=bool), np.zeros(length, dtype=bool)
+    terminated[-1], truncated[-1] = success[-1], not success[-1]  # panda-gym v3's rule
     converted = {
         **obs,
         **{f"final_{k}": nxt[k][-1] for k in OBS_KEYS},
         "action": np.asarray(ep["actions"], dtype=np.float32),
         "reward_sparse": recomputed["sparse"],
         "reward_dense": recomputed["dense"],
-        "terminated": terminals,
+        "terminated": terminated,
         "truncated": truncated,
-        "success": is_success(nxt["achieved_goal"], nxt["desired_goal"], task),
+        "success": success,
         "episode_seed": -1,
     }
-    return converted, fits
+    disagrees = bool((terminals != terminated).any())
+    return converted, fits, disagrees

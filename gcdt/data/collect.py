@@ -15,6 +15,9 @@ from gcdt.progress import progress_bar
 from gcdt.provenance import package_versions, utc_now
 from gcdt.rollout import VectorRollout
 
+#: What a collection records as each state's action (see `collect`).
+LABELS = ("executed", "clean")
+
 
 def collect(
     policy: Policy,
@@ -24,6 +27,7 @@ def collect(
     seed: int = 0,
     n_envs: int = 1,
     reward: str = "sparse",
+    labels: str = "executed",
     progress: bool = True,
 ) -> Dataset:
     """Collect the first episodes of a seeded run whose lengths add up to >= `transitions`.
@@ -35,8 +39,13 @@ def collect(
     other envs had started when the last needed one finished are discarded.
 
     `reward` is only what the policy sees as its previous reward (for return-conditioned
-    policies); the dataset stores both reward types, computed from the goals.
+    policies); the dataset stores both reward types, computed from the goals. `labels` is the
+    action recorded for each state: "executed", what the env ran, or "clean", what the
+    policy meant before its own exploration noise (DART: the data then teaches the expert's
+    action in the states its noisy execution visits).
     """
+    if labels not in LABELS:
+        raise GcdtError(f"unknown action labels {labels!r}: expected one of {', '.join(LABELS)}")
     spec = get_task(task)
     if not isinstance(transitions, int | np.integer) or transitions < 1:
         raise GcdtError(f"transitions must be a positive integer, got {transitions!r}")
@@ -63,7 +72,7 @@ def collect(
                 buf = running[i]
                 for key in OBS_KEYS:
                     buf[key].append(step.obs[key][i])
-                buf["action"].append(step.action[i])
+                buf["action"].append(step.action[i] if labels == "executed" else step.intended[i])
                 buf["terminated"].append(step.terminated[i])
                 buf["truncated"].append(step.truncated[i])
                 buf["success"].append(step.success[i])
@@ -87,6 +96,7 @@ def collect(
         "policy": policy.config(),
         "seed": int(seed),
         "n_envs": int(n_envs),
+        "labels": labels,
         "transitions_requested": int(transitions),
         "seconds": round(time.perf_counter() - started, 3),
         "stepping_seconds": round(stepping_seconds, 3),

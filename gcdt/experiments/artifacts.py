@@ -130,6 +130,7 @@ def _collect(spec: DataSpec) -> Dataset:
         seed=spec.seed,
         n_envs=spec.collect_envs,
         reward=reward,
+        labels=spec.expert_labels,
         progress=False,
     )
 

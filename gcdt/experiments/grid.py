@@ -11,17 +11,25 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from gcdt.errors import GcdtError
-from gcdt.experiments.profiles import Profile
+from gcdt.experiments.profiles import EVAL_SEED_STEP, Profile
+from gcdt.models import DTConfig
 from gcdt.paths import REPO_ROOT
+from gcdt.training import PAPER_EPOCHS, TrainConfig
+
+#: The context K and the batch of offline training (the paper's; the grid never changes them).
+DT_CONTEXT = DTConfig.__dataclass_fields__["context"].default
+TRAIN_BATCH = TrainConfig.__dataclass_fields__["batch_size"].default
 
 #: Bump when the meaning of a spec field or of a result file changes: old results re-run.
 #: 3: data specs name the scripted experts' action noise. 4: TQC+HER's configs run SBX's TQC
-#: on 8 envs (tqc_her.yaml's loop values).
+#: on 8 envs (tqc_her.yaml's loop values); episode seeds come from one stream per purpose;
+#: BC's budget follows `Profile.bc_budget`.
 RUN_SCHEMA = 4
 SECTIONS = ("table1", "rq4", "rq5", "ablation")
 #: Method name -> (trainer method, goal conditioning); `tqc` is the online baseline.
@@ -71,6 +79,7 @@ class DataSpec:
     expert: str  # "scripted" or "tqc"
     expert_tqc: TQCSpec | None  # the TQC agent when expert == "tqc"
     expert_noise: float  # action noise std of the scripted expert while collecting
+    expert_labels: str  # with noise: the action recorded, "executed" or "clean" (DART)
     base_size: int
     seed: int
     collect_envs: int
@@ -100,6 +109,7 @@ class DataSpec:
                 expert="random",
                 expert_tqc=None,
                 expert_noise=0.0,
+                expert_labels="executed",
                 expert_digest=None,
             )
         return dataclasses.replace(self, size=self.base_size, expert_ratio=1.0)
@@ -197,6 +207,7 @@ def data_spec(profile: Profile, task: str, size: int, expert_ratio: float) -> Da
         expert,
         expert_tqc,
         noise,
+        profile.expert_labels if noise else "executed",
         profile.dataset_size,
         profile.data_seed,
         profile.collect_envs,
@@ -209,6 +220,18 @@ def file_digest(path: Path) -> str:
     if not path.is_file():
         raise GcdtError(f"no published expert agent at {path}: fix the profile's expert_agents")
     return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+
+
+def bc_steps(profile: Profile, task: str, data: DataSpec) -> int | None:
+    """BC's gradient steps under the profile's BC budget rule (see `BC_BUDGETS`)."""
+    if profile.bc_budget == "steps":
+        return None if profile.train_steps is None else profile.train_steps[task]
+    # "samples": a DT step learns from `batch` windows of K state-action pairs, a BC step from
+    # `batch` pairs, so BC takes K times the DT's steps; under the paper's epoch budget that
+    # is the same number of epochs over transitions as the DT's over episodes.
+    if profile.train_steps is not None:
+        return profile.train_steps[task] * DT_CONTEXT
+    return PAPER_EPOCHS * math.ceil(data.size / TRAIN_BATCH)
 
 
 def run_spec(
@@ -227,11 +250,13 @@ def run_spec(
             profile.tqc_eval_every,
             profile.tqc_eval_episodes,
         )
-    train_steps = (
-        None if method == "tqc" or profile.train_steps is None else (profile.train_steps[task])
-    )
+    train_steps = None  # TQC+HER: online; the DTs: the profile's steps, or the paper's epochs
+    if method == "bc":
+        train_steps = bc_steps(profile, task, data)
+    elif method != "tqc" and profile.train_steps is not None:
+        train_steps = profile.train_steps[task]
     learning_rate = None if method == "tqc" else profile.learning_rate
-    eval_seeds = tuple(seed + 100 * i for i in range(profile.eval_seeds))
+    eval_seeds = tuple(seed + EVAL_SEED_STEP * i for i in range(profile.eval_seeds))
     return RunSpec(
         method,
         task,

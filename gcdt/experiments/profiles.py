@@ -13,10 +13,20 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gcdt.baselines.tqc_her import BACKENDS, load_tqc_config
+from gcdt.data.collect import LABELS
 from gcdt.envs import REWARDS
 from gcdt.errors import GcdtError
 
 PAPER_TASKS = ("reach", "push", "pick_and_place")
+#: How BC's training budget is set against the DT's, the rule named by `Profile.bc_budget`.
+BC_BUDGETS = {
+    "samples": "as many state-action samples as the DT (K = 20 times its gradient steps at "
+    "the same batch; under the epoch budget, as many epochs over transitions as the DT's "
+    "over episodes)",
+    "steps": "as many gradient steps as the DT",
+}
+#: A run's evaluation seeds are `seed + EVAL_SEED_STEP * i` for i < `eval_seeds`.
+EVAL_SEED_STEP = 100
 ALL_REWARDS = tuple(REWARDS)
 
 
@@ -43,6 +53,9 @@ class Profile:
     # so the data holds no recovery from a slip, and each phase of the task comes at an
     # almost fixed return-to-go (results/quick_checks/README.md).
     expert_noise: float = 0.0
+    # The action a noisy collection records (gcdt.data.LABELS): "executed", or "clean", the
+    # expert's action before its noise, as in DART.
+    expert_labels: str = "executed"
     # Per task, a published TQC+HER zip (path from the repository root) that collects that
     # task's expert data instead of `expert`, e.g. results/experts/tqc_push_sparse/model.zip.
     expert_agents: dict[str, str] = field(default_factory=dict)
@@ -54,6 +67,9 @@ class Profile:
     # Offline training (GC-DT, DT ablations, BC): gradient steps per task, or None for the
     # authors' 120 epochs of ceil(#episodes / 64) steps.
     train_steps: dict[str, int] | None = None
+    # BC's budget against the DT's (BC_BUDGETS): "samples" gives it as many state-action
+    # samples as the DT learns from, "steps" as many gradient steps.
+    bc_budget: str = "samples"
     # AdamW peak learning rate of offline training (the authors' 1e-4).
     learning_rate: float = 1e-4
     # Evaluation of every trained agent: env steps per evaluation seed (the paper's 10,000).
@@ -79,6 +95,26 @@ class Profile:
     gpus_per_run: float = 0.25
 
     def __post_init__(self) -> None:
+        if self.expert_labels not in LABELS:
+            raise GcdtError(
+                f"profile {self.name!r}: unknown expert_labels {self.expert_labels!r}: "
+                f"expected one of {', '.join(LABELS)}"
+            )
+        if self.bc_budget not in BC_BUDGETS:
+            raise GcdtError(
+                f"profile {self.name!r}: unknown BC budget rule {self.bc_budget!r}: expected "
+                f"one of {', '.join(BC_BUDGETS)}"
+            )
+        evaluated: dict[int, int] = {}  # evaluation seed -> the training seed it belongs to
+        for seed in self.seeds:
+            for eval_seed in (seed + EVAL_SEED_STEP * i for i in range(self.eval_seeds)):
+                if evaluated.setdefault(eval_seed, seed) != seed:
+                    raise GcdtError(
+                        f"profile {self.name!r}: training seeds {evaluated[eval_seed]} and "
+                        f"{seed} would both be evaluated with seed {eval_seed} (seed + "
+                        f"{EVAL_SEED_STEP} i); choose seeds that differ by less than "
+                        f"{EVAL_SEED_STEP} or fewer eval_seeds"
+                    )
         if not self.expert_noise >= 0.0:
             raise GcdtError(
                 f"profile {self.name!r}: expert_noise must be >= 0, got {self.expert_noise!r}"
@@ -175,6 +211,8 @@ def deviations(profile: Profile) -> list[str]:
         out.append(f"{seeds} per cell instead of {len(paper.seeds)}")
     if p.expert != paper.expert:
         noise = f", actions with Gaussian noise of std {p.expert_noise:g}" if p.expert_noise else ""
+        if p.expert_noise and p.expert_labels == "clean":
+            noise += " recorded with the clean action as label"
         out.append(
             f"expert data from the {p.expert} experts (gcdt.policies.scripted{noise}) instead "
             "of converged TQC+HER agents"
@@ -198,6 +236,10 @@ def deviations(profile: Profile) -> list[str]:
         steps = ", ".join(f"{t} {n:,}" for t, n in (p.train_steps or {}).items())
         out.append(
             f"offline training for a fixed number of gradient steps ({steps}) instead of 120 epochs"
+        )
+    if p.bc_budget != paper.bc_budget:
+        out.append(
+            f"BC trained with {BC_BUDGETS[p.bc_budget]} instead of {BC_BUDGETS[paper.bc_budget]}"
         )
     if p.learning_rate != paper.learning_rate:
         out.append(

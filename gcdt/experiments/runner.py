@@ -67,7 +67,9 @@ def execute_run(
         "seconds": timings,
         "torch_threads": torch.get_num_threads(),
         "git_commit": git_commit(),
-        "versions": package_versions((*TRACKED_PACKAGES, "stable-baselines3", "sb3-contrib")),
+        "versions": package_versions(
+            (*TRACKED_PACKAGES, "stable-baselines3", "sb3-contrib", "sbx-rl", "jax")
+        ),
     }
     RunStore(store_root).write(key, result)
     return result["status"]

@@ -29,6 +29,10 @@ class Policy(abc.ABC):
 
     #: Short name recorded with results and datasets.
     name: str = "policy"
+    #: The actions the policy meant at its last `predict`, before any exploration noise it
+    #: added itself; None when it added none. A collection may record these as the labels
+    #: (DART's clean labels) while the env executes the noisy ones.
+    intended: np.ndarray | None = None
 
     def __init__(self, task: str) -> None:
         self.spec: TaskSpec = get_task(task)

@@ -137,10 +137,12 @@ class ScriptedExpert(Policy):
     def predict(
         self, obs: Mapping[str, np.ndarray], episode_start: np.ndarray, reward: np.ndarray
     ) -> np.ndarray:
-        action = self._act(obs)
-        if self.noise_std > 0:
-            action = action + self.rng.normal(0.0, self.noise_std, size=action.shape)
-        return np.clip(action, -1.0, 1.0).astype(np.float32)
+        action = np.clip(self._act(obs), -1.0, 1.0).astype(np.float32)
+        if self.noise_std == 0:
+            return action
+        self.intended = action
+        noisy = action + self.rng.normal(0.0, self.noise_std, size=action.shape)
+        return np.clip(noisy, -1.0, 1.0).astype(np.float32)
 
     def config(self) -> dict[str, Any]:
         return {**super().config(), "noise_std": self.noise_std}

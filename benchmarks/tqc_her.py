@@ -165,7 +165,8 @@ def push(run_dir: Path) -> dict:
     rate = run["env_steps"] / run["train_seconds"]
     return {
         "run": str(run_dir),
-        "command": run["command"],
+        "training_command": run["command"],
+        "training_commit": run["git_commit"],
         "config": run["config"],
         "env_steps": run["env_steps"],
         "train_minutes": round(run["train_seconds"] / 60, 1),

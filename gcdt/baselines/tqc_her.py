@@ -223,6 +223,7 @@ def train_tqc(
         raise GcdtError(f"{out} already holds a TQC+HER run ({taken[0]}); choose another --out")
 
     _check_loop(cfg, device)
+    commit = git_commit()  # the code the run starts with, not what the tree holds at its end
     out.mkdir(parents=True, exist_ok=True)
     model = _build(cfg, spec.name, reward, seed, device)
     # Travels inside every saved zip: what `TQCPolicy` checks a model against.
@@ -280,7 +281,7 @@ def train_tqc(
             "final": evaluator.rows[-1] if evaluator.rows else None,
             "command": command,
             "created": utc_now(),
-            "git_commit": git_commit(),
+            "git_commit": commit,
             "versions": package_versions((*TRACKED_PACKAGES, *TQC_PACKAGES[cfg.backend])),
         },
     )

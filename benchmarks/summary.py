@@ -340,6 +340,7 @@ def end_to_end_section() -> str | None:
 
 def tqc_section() -> str | None:
     speed, reach = _load("tqc_her_throughput"), _load("tqc_her_reach")
+    push = _load("tqc_her_push")
     parts = []
     if speed is not None:
         rows = [
@@ -390,6 +391,28 @@ def tqc_section() -> str | None:
                 ],
                 rows,
             )
+        )
+    if push is not None:
+        held = push["held_out_evaluation"]
+        rows = [
+            [
+                int(p["env_steps"]),
+                f"{p['train_seconds'] / 60:.1f}",
+                f"{100 * p['success_rate']:.0f} %",
+            ]
+            for p in push["learning_curve"]
+        ]
+        parts.append(
+            f"TQC+HER on Push (sparse), config `{push['config']['name']}` with the "
+            f"{push['config']['backend']} backend on {push['config']['n_envs']} envs "
+            f"(`{push['training_command']}`, then `benchmarks/tqc_her.py push`): "
+            f"{push['env_steps']:,} env steps in {push['train_minutes']:.1f} min of training "
+            f"({push['env_steps_per_second']:.0f} env steps/s); the final model succeeds in "
+            f"{100 * held['success_rate']:.1f} % of {held['episodes']} held-out episodes "
+            f"(return {held['mean_return']:.2f}); PickAndPlace's ~700k steps would take "
+            f"{push['pick_and_place_hours_at_this_speed']:.1f} h at this speed. Learning curve "
+            "(periodic evaluations on their own seeds):\n\n"
+            + _table(["env steps", "training min", "success"], rows)
         )
     return "\n\n".join(parts) or None
 

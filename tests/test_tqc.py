@@ -7,6 +7,7 @@ reward on 2 cores: too long for the default suite).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import shutil
 
@@ -250,8 +251,6 @@ def test_train_refuses_a_folder_holding_a_run(assert_usage_error, push_run, tmp_
 
 
 def test_sbx_refuses_a_config_it_cannot_run(tmp_path):
-    import dataclasses
-
     cfg = dataclasses.replace(load_tqc_config("cpu", "reach"), n_critics=3)
     with pytest.raises(GcdtError, match="the sbx backend's TQC has exactly 2 critics"):
         train_tqc("reach", "sparse", cfg, tmp_path / "run", progress=False)
@@ -294,3 +293,30 @@ def test_training_is_reproducible(tmp_path, backend, n_envs):
         weights.append(_weights(make_policy(f"tqc:{result.model}", "reach").sb3_policy))
     assert len(weights[0]) >= 4
     assert all(np.array_equal(a, b) for a, b in zip(*weights, strict=True))
+
+
+PUBLISHED_PUSH = "results/experts/tqc_push_sparse/model.zip"
+
+
+def test_the_published_push_expert_reaches_goals_and_can_collect_a_grids_data(tmp_path):
+    """The TQC+HER Push agent kept in the repository (trained with the fast loop, see its
+    run.json) succeeds on held-out episodes, and a profile can make it Push's expert."""
+    from gcdt.experiments.artifacts import collecting_policy
+    from gcdt.experiments.grid import data_spec
+    from gcdt.experiments.profiles import SMOKE
+    from gcdt.paths import REPO_ROOT
+
+    path = REPO_ROOT / PUBLISHED_PUSH
+    assert path.stat().st_size < 5 * 2**20  # small enough to keep in git
+    result = evaluate(make_policy(f"tqc:{path}", "push"), "push", "sparse", episodes=40, seed=9)
+    assert result.summary["success_rate"] >= 0.85  # held out: the evaluation stream
+    profile = dataclasses.replace(SMOKE, expert_agents={"push": PUBLISHED_PUSH})
+    spec = data_spec(profile, "push", profile.dataset_size, 1.0)
+    assert spec.expert == f"tqc:{PUBLISHED_PUSH}" and spec.expert_noise == 0.0
+    assert spec.key() != data_spec(SMOKE, "push", SMOKE.dataset_size, 1.0).key()
+    policy, reward = collecting_policy(spec)
+    assert policy.name == "tqc" and reward == "sparse"
+    with pytest.raises(GcdtError, match="changed since this grid was planned"):
+        collecting_policy(dataclasses.replace(spec, expert_digest="0" * 16))
+    with pytest.raises(GcdtError, match="no published expert agent at"):
+        data_spec(dataclasses.replace(SMOKE, expert_agents={"push": "nope.zip"}), "push", 10, 1.0)

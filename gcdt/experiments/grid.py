@@ -18,13 +18,7 @@ from typing import Any
 
 from gcdt.errors import GcdtError
 from gcdt.experiments.profiles import EVAL_SEED_STEP, Profile
-from gcdt.models import DTConfig
 from gcdt.paths import REPO_ROOT
-from gcdt.training import PAPER_EPOCHS, TrainConfig
-
-#: The context K and the batch of offline training (the paper's; the grid never changes them).
-DT_CONTEXT = DTConfig.__dataclass_fields__["context"].default
-TRAIN_BATCH = TrainConfig.__dataclass_fields__["batch_size"].default
 
 #: Bump when the meaning of a spec field or of a result file changes: old results re-run.
 #: 3: data specs name the scripted experts' action noise. 4: TQC+HER's configs run SBX's TQC
@@ -226,12 +220,16 @@ def bc_steps(profile: Profile, task: str, data: DataSpec) -> int | None:
     """BC's gradient steps under the profile's BC budget rule (see `BC_BUDGETS`)."""
     if profile.bc_budget == "steps":
         return None if profile.train_steps is None else profile.train_steps[task]
+    from gcdt.training import PAPER_EPOCHS, TrainConfig  # torch: not for `gcdt --help`
+
+    # The context K and the batch of offline training: the paper's, which the grid keeps.
+    context, batch = TrainConfig.context, TrainConfig.batch_size
     # "samples": a DT step learns from `batch` windows of K state-action pairs, a BC step from
     # `batch` pairs, so BC takes K times the DT's steps; under the paper's epoch budget that
     # is the same number of epochs over transitions as the DT's over episodes.
     if profile.train_steps is not None:
-        return profile.train_steps[task] * DT_CONTEXT
-    return PAPER_EPOCHS * math.ceil(data.size / TRAIN_BATCH)
+        return profile.train_steps[task] * context
+    return PAPER_EPOCHS * math.ceil(data.size / batch)
 
 
 def run_spec(

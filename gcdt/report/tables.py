@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
@@ -91,23 +92,27 @@ def _pooled_std(evaluations: list[dict]) -> float:
 
 
 def bootstrap_ci(values: np.ndarray, seed: int = 0) -> tuple[float, float]:
-    """95 % percentile-bootstrap interval of the mean of `values` (seeds)."""
+    """95 % percentile-bootstrap interval of the mean of `values` (seeds), by scipy."""
     values = np.asarray(values, dtype=np.float64)
-    if len(values) < 2:
+    if len(values) < 2 or np.all(values == values[0]):  # no spread: nothing to resample
         return float(values[0]), float(values[0])
-    rng = np.random.default_rng(seed)
-    means = rng.choice(values, (BOOTSTRAP_SAMPLES, len(values))).mean(axis=1)
-    low, high = np.percentile(means, [2.5, 97.5])
-    return float(low), float(high)
+    result = stats.bootstrap(
+        (values,),
+        np.mean,
+        n_resamples=BOOTSTRAP_SAMPLES,
+        confidence_level=0.95,
+        method="percentile",
+        rng=np.random.default_rng(seed),
+    )
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
 
 
-def wilson_ci(rate: float, n: int, z: float = 1.96) -> tuple[float, float]:
-    """95 % Wilson score interval of a success rate measured on `n` episodes."""
+def wilson_ci(rate: float, n: int) -> tuple[float, float]:
+    """95 % Wilson score interval of a success rate measured on `n` episodes, by scipy."""
     if not n:
         return float("nan"), float("nan")
-    centre = (rate + z**2 / (2 * n)) / (1 + z**2 / n)
-    half = z * np.sqrt(rate * (1 - rate) / n + z**2 / (4 * n**2)) / (1 + z**2 / n)
-    return float(centre - half), float(centre + half)
+    interval = stats.binomtest(round(rate * n), n).proportion_ci(0.95, method="wilson")
+    return float(interval.low), float(interval.high)
 
 
 def _interval(group: pd.DataFrame, metric: str, scale: float) -> tuple[float, float]:

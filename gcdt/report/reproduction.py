@@ -124,9 +124,15 @@ def write_check(
     try:
         published = tables.load_runs(profile, published_runs)
     except GcdtError:
+        if profile.name == "smoke":
+            why = "the smoke profile's numbers are never published"
+        elif any(published_runs.glob("*.json")):
+            why = "the published runs come from an earlier version of the grid, with other run keys"
+        else:
+            why = "none are published"
         return (
             f"No published results of profile {profile.name!r} in {published_runs}: nothing to "
-            "compare with (the smoke profile's numbers are never published).",
+            f"compare with ({why}).",
             None,
         )
     ours = tables.load_runs(profile, results_dir(profile.name, ours_root) / "runs")

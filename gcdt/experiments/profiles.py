@@ -259,7 +259,7 @@ def deviations(profile: Profile) -> list[str]:
     loop = load_tqc_config(p.tqc_config, "push").with_budget(**p.tqc_budget)
     if (loop.backend, loop.n_envs) != ("sb3", 1):
         out.append(
-            f"TQC+HER trained with the {loop.backend} backend ({BACKENDS[loop.backend][1]}) on "
+            f"TQC+HER trained with the {loop.backend} backend ({BACKENDS[loop.backend]}) on "
             f"{loop.n_envs} envs side by side (the same algorithm and gradient steps per env "
             "step) instead of sb3-contrib's TQC on one env, as rl-baselines3-zoo runs it"
         )

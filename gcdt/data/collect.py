@@ -68,11 +68,12 @@ def collect(
     with rollout:
         while kept_steps < transitions:
             step = rollout.step()
+            recorded = step.action if labels == "executed" else step.intended
             for i in range(n_envs):
                 buf = running[i]
                 for key in OBS_KEYS:
                     buf[key].append(step.obs[key][i])
-                buf["action"].append(step.action[i] if labels == "executed" else step.intended[i])
+                buf["action"].append(recorded[i])
                 buf["terminated"].append(step.terminated[i])
                 buf["truncated"].append(step.truncated[i])
                 buf["success"].append(step.success[i])

@@ -59,7 +59,11 @@ def test_paper_profile_is_the_paper_and_others_list_their_deviations():
     (loop,) = deviations(PROFILES["paper"])
     assert loop.startswith("TQC+HER trained with the sbx backend (SBX, JAX) on 8 envs")
     quick = deviations_text(get_profile("quick"))
-    assert "1 seed per cell instead of 3" in quick
+    assert "per cell instead of" not in quick  # Table 1 at the paper's 3 seeds
+    assert "RQ4 (Fig. 3) not run" in quick and "RQ4 subset sizes" not in quick
+    standard = deviations_text(get_profile("standard"))
+    assert "RQ4 (Fig. 3) on reach, push, pick_and_place × sparse only" in standard
+    assert "RQ4 subset sizes 5,000, 10,000, 20,000 instead of" in standard
     assert "scripted experts" in quick and "instead of 1,000,000" in quick
     assert "env steps" not in quick  # the paper's 10,000-step evaluation
     smoke = deviations_text(get_profile("smoke"))
@@ -73,7 +77,7 @@ def test_paper_profile_is_the_paper_and_others_list_their_deviations():
 def test_expert_noise_reaches_the_scripted_collections_only():
     mixture = next(
         e.spec.data
-        for e in build_grid(get_profile("quick"), only="rq5")
+        for e in build_grid(get_profile("standard"), only="rq5")
         if e.spec.data.expert_ratio == 0.5
     )
     assert mixture.expert_noise == mixture.base("expert").expert_noise == 0.2
@@ -337,11 +341,13 @@ def test_dry_run_lists_runs_with_state_and_cost(capsys):
     from gcdt.cli import main
     from gcdt.experiments.costs import CostModel
 
-    assert main(["sweep", "--profile", "quick", "--dry-run", "--only", "rq4"]) == 0
+    assert main(["sweep", "--profile", "standard", "--dry-run", "--only", "rq4"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    sizes = get_profile("quick").rq4_sizes
-    assert len(lines) == len(sizes) + 1 and lines[-1].startswith(f"{len(sizes)} runs, ")
-    assert all("gcdt push/sparse seed 0" in line and " min " in line for line in lines[:-1])
+    p = get_profile("standard")
+    n = len(p.rq4_sizes) * len(p.seeds) * len(p.rq4.tasks)
+    assert len(lines) == n + 1 and lines[-1].startswith(f"{n} runs, ")
+    assert all("/sparse seed " in line and " min " in line for line in lines[:-1])
+    assert sum("gcdt push/sparse seed 2" in line for line in lines) == len(p.rq4_sizes)
     costs = CostModel()
     short, long = (
         dataclasses.replace(build_grid(TINY, only="table1")[0].spec, train_steps=n)

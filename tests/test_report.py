@@ -74,7 +74,9 @@ def test_table1_aggregates_over_seeds_beside_the_paper(runs):
     assert row["return_mean"] == pytest.approx(-10.0) and row["seeds"] == 3
     assert (row["paper_return"], row["paper_success"]) == (-1.72, 100.0)
     md = tables.to_markdown(table)
-    assert "| GC-DT | -10.00 ± 10.00 / 80.0 ± 10.0 (paper -1.72 / 100.0) |" in md
+    low, high = row["success_ci_low"], row["success_ci_high"]
+    cell = f"-10.00 ± 10.00 / 80.0 ± 10.0 [{low:.1f}, {high:.1f}] (paper -1.72 / 100.0)"
+    assert f"| GC-DT | {cell} |" in md
     tex = tables.to_latex(table, "Performance", "tab:t1")
     assert r"\multicolumn{4}{c}{\textit{Sparse Reward}} \\" in tex and r"\bottomrule" in tex
 

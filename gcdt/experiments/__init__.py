@@ -1,6 +1,6 @@
 """The experiment grid of the paper: profiles, runs, the run store, and sweeps over them.
 
-get_profile(name) -> Profile              # smoke | quick | paper (gcdt.experiments.profiles)
+get_profile(name) -> Profile              # smoke|quick|standard|paper (gcdt.experiments.profiles)
 build_grid(profile, only=None)            # every RunSpec, each once (gcdt.experiments.grid)
 sweep(profile, backend="local"|"ray")     # run what is not done yet (gcdt.experiments.sweep)
 """

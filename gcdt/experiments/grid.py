@@ -23,8 +23,8 @@ from gcdt.paths import REPO_ROOT
 #: Bump when the meaning of a spec field or of a result file changes: old results re-run.
 #: 3: data specs name the scripted experts' action noise. 4: TQC+HER's configs run SBX's TQC
 #: on 8 envs (tqc_her.yaml's loop values); episode seeds come from one stream per purpose;
-#: BC's budget follows `Profile.bc_budget`.
-RUN_SCHEMA = 4
+#: BC's budget follows `Profile.bc_budget`. 5: faster scripted experts (shorter episodes).
+RUN_SCHEMA = 5
 SECTIONS = ("table1", "rq4", "rq5", "ablation")
 #: Method name -> (trainer method, goal conditioning); `tqc` is the online baseline.
 OFFLINE_METHODS = {

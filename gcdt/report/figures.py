@@ -6,8 +6,8 @@
 * Fig. 4 (RQ5): success rate against the share of expert data (`expert_ratio_figure`).
 
 Fig. 2-4 and the learning curves read only the run results (`tables.load_runs`); Fig. 3 and 4
-draw one line per task, one panel per reward, the mean over seeds with its standard deviation
-as error bars.
+draw one line per task, one panel per reward, the mean over seeds with its 95 % interval as
+error bars (bootstrap over seeds; with one seed, Wilson over its evaluation episodes).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt
 import pandas as pd
 
 from gcdt.paths import figures_dir, write_if_changed
-from gcdt.report.tables import TASK_NAMES
+from gcdt.report.tables import TASK_NAMES, aggregate
 
 FORMATS = ("png", "pdf")
 
@@ -48,7 +48,7 @@ def save(fig: plt.Figure, out_dir: str | Path, name: str) -> list[Path]:
 def _success_panels(
     runs: pd.DataFrame, section: str, x: str, xlabel: str, scale: float = 1.0
 ) -> plt.Figure | None:
-    """Success rate (%) against `x`: one panel per reward, one line per task, std over seeds
+    """Success rate (%) against `x`: one panel per reward, one line per task, 95 % intervals
     (None when no run belongs to `section`)."""
     sel = runs[runs["sections"].apply(lambda s: section in s) & (runs["method"] == "gcdt")]
     if sel.empty:
@@ -62,17 +62,12 @@ def _success_panels(
             cell = sel[(sel["reward"] == reward) & (sel["task"] == task)]
             if cell.empty:
                 continue
-            stats = (
-                cell.assign(pct=100 * cell["success_rate"])
-                .groupby(x)["pct"]
-                .agg(["mean", "std"])
-                .fillna(0.0)
-                .sort_index()
-            )
+            stats = aggregate(cell, [x]).sort_values(x)
+            mean = stats["success_mean"].to_numpy()
             ax.errorbar(
-                stats.index * scale,
-                stats["mean"],
-                yerr=stats["std"],
+                stats[x] * scale,
+                mean,
+                yerr=[mean - stats["success_ci_low"], stats["success_ci_high"] - mean],
                 marker="o",
                 capsize=3,
                 label=TASK_NAMES[task],

@@ -208,13 +208,16 @@ def _ordered(table: pd.DataFrame, rewards: list[str], methods: list[str]) -> pd.
     return table.sort_values(list(order), key=lambda c: c.map(order[c.name])).reset_index(drop=True)
 
 
-def _cell(row: pd.Series, paper: bool, pm: str = " ± ") -> str:
-    """'return / success' (mean ± std over seeds; one seed has no std to show)."""
+def _cell(row: pd.Series, paper: bool, pm: str = " ± ", interval: bool = True) -> str:
+    """'return / success' (mean ± std over seeds, and with `interval` the success rate's 95 %
+    interval over seeds in brackets; one seed has no spread to show)."""
     if row["seeds"] > 1:
         ours = (
             f"{row['return_mean']:.2f}{pm}{row['return_std']:.2f} / "
             f"{row['success_mean']:.1f}{pm}{row['success_std']:.1f}"
         )
+        if interval:
+            ours += f" [{row['success_ci_low']:.1f}, {row['success_ci_high']:.1f}]"
     else:
         ours = f"{row['return_mean']:.2f} / {row['success_mean']:.1f}"
     if paper and not np.isnan(row.get("paper_return", np.nan)):
@@ -264,7 +267,10 @@ def to_latex(table: pd.DataFrame, caption: str, label: str) -> str:
             r"\midrule",
         ]
         for method, rows in block.groupby("method", sort=False):
-            cells = {r["task"]: _cell(r, False, pm=" $\\pm$ ") for _, r in rows.iterrows()}
+            cells = {
+                r["task"]: _cell(r, False, pm=" $\\pm$ ", interval=False)
+                for _, r in rows.iterrows()
+            }
             out.append(
                 f"{METHOD_NAMES[method]} & Ret / Succ & "
                 + " & ".join(cells.get(t, "--") for t in tasks)

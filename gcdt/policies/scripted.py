@@ -6,6 +6,9 @@ state), so it recovers by itself when the object slips, and it is vectorised ove
 
 panda-gym's end-effector control moves the gripper towards `ee + 0.05 * action[:3]` each step,
 so every phase below picks a target point and the action is the clipped displacement to it.
+Episodes end on success (object or gripper within 5 cm of the goal), so the sparse return is
+minus the steps taken: the experts move at full speed on every axis (the action is clipped
+per coordinate) wherever the exact path does not matter, and need not be exact at the goal.
 Observation layouts (panda-gym 3.0.7):
 
 * Reach: `ee_pos(3) ee_vel(3)`
@@ -26,72 +29,99 @@ from gcdt.policies.base import Policy
 ACTION_SCALE = 0.05  # metres of end-effector displacement per unit action (panda-gym)
 CUBE_HALF = 0.02  # half edge of the Push / PickAndPlace cube
 
-# Push: the closed fingertips come down this far behind the cube's centre, clear of its
-# corners even when it has turned (half diagonal 2.8 cm), then push towards the goal.
-PUSH_CONTACT = 0.055
+# Push. The closed fingertips come down on a circle of radius PUSH_RUNUP around the cube, go
+# round it at table height to the point behind it (seen from the goal), then push. Aligning
+# before contact from a few cm back beats aiming straight at the contact point: a
+# fast-moving gripper that touches the cube off-line launches it (it slides a long way).
 PUSH_Z = 0.02  # fingertip height while pushing (cube centre height)
-PUSH_SPEED = 0.4  # action limit while in contact with the cube (2 cm per step)
-PUSH_DEPTH = 0.04  # how far ahead of the gripper, along the cube-goal line, a push aims
-SAFE_Z = 0.1  # height at which the fingers clear the cube when repositioning
+PUSH_RUNUP = 0.07  # approach circle radius: fingertips clear the cube's corners (2.8 cm) and lag
+PUSH_STEP = 1.0  # radians per waypoint round the circle: each chord stays ~6 cm from the cube
+PUSH_CONTACT = 0.045  # fingertip distance behind the cube centre that a push holds
+PUSH_DEPTH = 0.06  # how far ahead of that point, along the cube-goal line, a push aims
+PUSH_LATERAL = 0.015  # off the cube-goal line by more than this, re-approach instead of pushing
+PUSH_ALIGNED = 0.005  # within this, push at full speed; slower in between, to steer first
+PUSH_DIAGONAL = 0.5  # push speed across a cube diagonal, relative to along a face normal
+PUSH_CLEARANCE = 0.04  # closer than this to the cube (not pushing): lift off it first
+PUSH_LIFT_Z = 0.07  # height at which the fingers clear the cube
 
-# PickAndPlace: finger width (sum of both fingers) when closed on the 4 cm cube, and open.
-GRASP_WIDTH = 0.045
+# PickAndPlace: the open fingers straddle the cube along y, so only a y offset makes a finger
+# land on it; the gripper descends in one motion, staying above the cube (by PICK_CONE per
+# metre of y offset, at most PICK_HOVER) while the y offset exceeds PICK_Y_FREE.
+PICK_CONE = 2.0
+PICK_HOVER = 0.05
+PICK_Y_FREE = 0.008
+PICK_CLOSE_XY = 0.008  # close the fingers once this close to the cube centre in x and in y ...
+PICK_CLOSE_Z = 0.015  # ... and in z (still descending: closing takes a step)
+PICK_HOLD = 0.03  # the cube counts as held while within this of the gripper in xy and in z
+# Finger width (sum of both fingers) when closed on the 4 cm cube (up to its 5.7 cm diagonal,
+# if it has turned), and open (8 cm); below MISSED_WIDTH the fingers closed on nothing.
+GRASP_WIDTH = 0.06
 MISSED_WIDTH = 0.03
 
 
+def _clipped_action(target: np.ndarray, ee: np.ndarray) -> np.ndarray:
+    """Displacement towards `target`, each coordinate clipped to [-1, 1].
+
+    The fastest way to a point: every axis moves at full speed until it is there. The
+    gripper lags its commanded target, so this also aims a little past the goal.
+    """
+    return np.clip((target - ee) / ACTION_SCALE, -1.0, 1.0)
+
+
 def _to_action(target: np.ndarray, ee: np.ndarray, limit: np.ndarray | float = 1.0) -> np.ndarray:
-    """Displacement towards `target`, its norm at most `limit` (per env).
+    """Displacement towards `target`, its largest coordinate at most `limit` (per env).
 
     Scaling the whole vector (not clipping each coordinate) keeps the direction of motion,
     which matters when pushing: a clipped diagonal push turns into an axis-aligned one.
     """
     action = (target - ee) / ACTION_SCALE
-    norm = np.linalg.norm(action, axis=-1, keepdims=True)
-    scale = np.minimum(1.0, np.reshape(limit, (-1, 1)) / np.maximum(norm, 1e-9))
+    largest = np.max(np.abs(action), axis=-1, keepdims=True)
+    scale = np.minimum(1.0, np.reshape(limit, (-1, 1)) / np.maximum(largest, 1e-9))
     return np.clip(action * scale, -1.0, 1.0)
 
 
 def _reach(obs: Mapping[str, np.ndarray]) -> np.ndarray:
     ee = obs["observation"][:, 0:3]
-    return _to_action(obs["desired_goal"], ee)
+    return _clipped_action(obs["desired_goal"], ee)
 
 
 def _push(obs: Mapping[str, np.ndarray]) -> np.ndarray:
     o = obs["observation"]
-    ee, obj, goal = o[:, 0:3], o[:, 6:9], obs["desired_goal"]
+    ee, obj, yaw, goal = o[:, 0:3], o[:, 6:9], o[:, 11], obs["desired_goal"]
 
     to_goal = goal[:, :2] - obj[:, :2]
     dist = np.linalg.norm(to_goal, axis=1, keepdims=True)
     direction = to_goal / np.maximum(dist, 1e-6)  # unit push direction, [n, 2]
-    behind = obj[:, :2] - direction * PUSH_CONTACT  # where the fingertips must be to push
 
     rel = ee[:, :2] - obj[:, :2]
     along = np.sum(rel * direction, axis=1)  # < 0 when the gripper is behind the cube
     lateral = np.linalg.norm(rel - along[:, None] * direction, axis=1)
     low = ee[:, 2] < PUSH_Z + 0.02
-    # Loose once low and pushing: the cube turns and drifts a little, and the push target
-    # below steers back onto the line; only a lost cube is worth a new approach.
-    in_line = (along < -CUBE_HALF) & (lateral < np.where(low, 0.03, 0.01))
-    # Wider once on the way down, so a slightly moving approach point does not abort it.
-    on_the_way_down = ee[:, 2] < SAFE_Z - 0.01
-    over_behind = np.linalg.norm(ee[:, :2] - behind, axis=1) < np.where(on_the_way_down, 0.02, 0.01)
+    pushing = low & (along < -CUBE_HALF) & (lateral < PUSH_LATERAL)
+    # Too close to the cube to go round it without knocking it: lift off first.
+    lifting = ~pushing & (np.linalg.norm(rel, axis=1) < PUSH_CLEARANCE) & (ee[:, 2] < PUSH_LIFT_Z)
 
-    pushing = in_line & low
-    descending = ~pushing & over_behind
-    lifting = ~pushing & ~descending & low  # low but misaligned: lift before moving over
-    # Push: move forward along the cube-goal line (steering back onto it), slower near the goal.
-    depth = np.minimum(dist, PUSH_DEPTH)
+    # Approach: step round the cube on the run-up circle, at most PUSH_STEP at a time,
+    # towards the run-up point behind it; the descent happens on the way.
+    angle = np.arctan2(rel[:, 1], rel[:, 0])
+    heading = np.arctan2(direction[:, 1], direction[:, 0])
+    to_go = (heading - angle) % (2 * np.pi) - np.pi  # to the angle behind the cube, heading + pi
+    waypoint = angle + np.sign(to_go) * np.minimum(np.abs(to_go), PUSH_STEP)
     target = np.empty_like(ee)
-    push_to = obj[:, :2] + (along[:, None] + depth) * direction  # forward on the line
-    target[:, :2] = np.where(pushing[:, None], push_to, behind)
+    target[:, 0] = obj[:, 0] + PUSH_RUNUP * np.cos(waypoint)
+    target[:, 1] = obj[:, 1] + PUSH_RUNUP * np.sin(waypoint)
+    target[:, 2] = np.where(lifting, PUSH_LIFT_Z, PUSH_Z)
     target[:, :2] = np.where(lifting[:, None], ee[:, :2], target[:, :2])
-    # Reposition no lower than SAFE_Z and never downwards: a diagonal descent overshoots
-    # (the arm lags its target) and knocks the cube before the gripper is behind it.
-    target[:, 2] = np.where(pushing | descending, PUSH_Z, np.maximum(ee[:, 2], SAFE_Z))
-    # A full-speed push launches the cube, which then slides past the goal or off the table.
-    # Slowing down over the last 10 cm keeps the cube from sliding past the goal.
-    push_speed = np.clip(dist[:, 0] / 0.1, 0.5, 1.0) * PUSH_SPEED
-    return _to_action(target, ee, np.where(pushing, push_speed, 1.0))
+    # Push: hold the point behind the cube on the cube-goal line (steering back onto it) and
+    # move forward, the less the further off the line the gripper is.
+    forward = np.clip((PUSH_LATERAL - lateral) / (PUSH_LATERAL - PUSH_ALIGNED), 0.0, 1.0)
+    push_to = obj[:, :2] + (forward[:, None] * PUSH_DEPTH - PUSH_CONTACT) * direction
+    target[:, :2] = np.where(pushing[:, None], push_to, target[:, :2])
+    # A push across the cube's diagonal makes it slide sideways off the fingertips, and a
+    # launched cube slides far: push at full speed only along a face normal.
+    skew = np.abs((heading - yaw + np.pi / 4) % (np.pi / 2) - np.pi / 4)  # 0 to pi / 4
+    speed = 1.0 - (1.0 - PUSH_DIAGONAL) * skew / (np.pi / 4)
+    return np.where(pushing[:, None], _to_action(target, ee, speed), _clipped_action(target, ee))
 
 
 def _pick_and_place(obs: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -99,19 +129,19 @@ def _pick_and_place(obs: Mapping[str, np.ndarray]) -> np.ndarray:
     ee, width, obj, goal = o[:, 0:3], o[:, 6], o[:, 7:10], obs["desired_goal"]
 
     rel = obj - ee
+    offset = np.abs(rel)
     horizontal = np.linalg.norm(rel[:, :2], axis=1)
-    at_cube = (horizontal < 0.01) & (np.abs(rel[:, 2]) < 0.01)
-    holding = (horizontal < 0.02) & (np.abs(rel[:, 2]) < 0.02) & (width < GRASP_WIDTH)
-    holding &= width > MISSED_WIDTH  # closed on nothing: the grasp missed
-    above = horizontal < 0.01
+    holding = (horizontal < PICK_HOLD) & (offset[:, 2] < PICK_HOLD)
+    holding &= (width < GRASP_WIDTH) & (width > MISSED_WIDTH)  # closed on the cube
+    at_cube = (offset[:, 0] < PICK_CLOSE_XY) & (offset[:, 1] < PICK_CLOSE_XY)
+    at_cube &= offset[:, 2] < PICK_CLOSE_Z
 
-    target = obj + np.array([0.0, 0.0, 0.03])  # approach from above, fingers open
-    target = np.where(above[:, None], obj, target)  # then descend onto the cube
+    # Approach and descend in one motion, above the cube only while a finger could land on it.
+    target = obj.copy()
+    target[:, 2] += np.clip(PICK_CONE * (offset[:, 1] - PICK_Y_FREE), 0.0, PICK_HOVER)
     target = np.where(holding[:, None], goal, target)  # carry it to the goal
     gripper = np.where(holding | at_cube, -1.0, 1.0)  # close on the cube, else open
-    # Closing takes a few steps: hold still meanwhile so the fingers close around the cube.
-    target = np.where((at_cube & ~holding)[:, None], ee, target)
-    return np.concatenate([_to_action(target, ee), gripper[:, None]], axis=1)
+    return np.concatenate([_clipped_action(target, ee), gripper[:, None]], axis=1)
 
 
 _EXPERTS = {"reach": _reach, "push": _push, "pick_and_place": _pick_and_place}

@@ -29,11 +29,12 @@ from gcdt.experiments import (
     sweep,
 )
 from gcdt.experiments.grid import RUN_SCHEMA
-from gcdt.experiments.profiles import SMOKE, Scope
+from gcdt.experiments.profiles import SMOKE, Scope, target_seeds
 
 ONE = Scope(tasks=("reach",), rewards=("sparse",))
-#: Seven real runs on Reach in well under a minute: Table 1 (GC-DT, BC, TQC+HER), one RQ4
-#: subset, one RQ5 mixture, the two DT ablations.
+#: Nine real runs on Reach in well under a minute: Table 1 (GC-DT, BC, TQC+HER), one RQ4
+#: subset, one RQ5 mixture, the two DT ablations, and two return-target points (one is
+#: Table 1's GC-DT checkpoint at target 0 on the study's seeds, the other at -10).
 TINY = dataclasses.replace(
     SMOKE,
     name="tiny",
@@ -51,6 +52,8 @@ TINY = dataclasses.replace(
     rq4=ONE,
     rq5=ONE,
     ablation=ONE,
+    targets=ONE,
+    return_targets={"sparse": (0.0, -10.0)},
 )
 
 
@@ -92,6 +95,10 @@ def test_expert_noise_reaches_the_scripted_collections_only():
 def test_a_profile_whose_evaluation_seeds_collide_is_refused():
     with pytest.raises(GcdtError, match="training seeds 0 and 100 would both be evaluated"):
         dataclasses.replace(SMOKE, seeds=(0, 100), eval_seeds=2)
+    with pytest.raises(GcdtError, match="evaluation seeds reach 10000, the return-target study"):
+        dataclasses.replace(SMOKE, seeds=(0, 10_000))
+    with pytest.raises(GcdtError, match="return_targets must map sparse, dense to finite"):
+        dataclasses.replace(SMOKE, return_targets={"sparse": (0.0, float("nan"))})
     assert dataclasses.replace(SMOKE, seeds=(0, 1, 2), eval_seeds=5).eval_seeds == 5
 
 
@@ -159,11 +166,11 @@ def local_sweep(tmp_path_factory):
 
 def test_local_sweep_runs_every_run_once(local_sweep):
     root, summary = local_sweep
-    assert summary.ok and len(summary.done) == 7 and not summary.skipped
+    assert summary.ok and len(summary.done) == 9 and not summary.skipped
     results = _results(root / "runs")
-    assert len(results) == 7 and all(r["status"] == "done" for r in results.values())
+    assert len(results) == 9 and all(r["status"] == "done" for r in results.values())
     methods = sorted(r["spec"]["method"] for r in results.values())
-    assert methods == ["bc", "dt", "dt-desired", "gcdt", "gcdt", "gcdt", "tqc"]
+    assert methods == ["bc", "dt", "dt-desired", *["gcdt"] * 5, "tqc"]
     for r in results.values():
         assert r["schema"] == RUN_SCHEMA and r["evaluations"][0]["episodes"] >= 1
         assert 0.0 <= r["metrics"]["success_rate"] <= 1.0
@@ -177,12 +184,19 @@ def test_local_sweep_runs_every_run_once(local_sweep):
         if metadata["source"] == "collect":  # not a subset or mixture
             policies[metadata["policy"]["name"]] = metadata["policy"].get("noise_std")
     assert policies == {"scripted": TINY.expert_noise, "random": None} and TINY.expert_noise > 0
-    # Every offline run trained at the profile's learning rate, not the trainer's default.
+    # Every offline run trained at the profile's learning rate, not the trainer's default; the
+    # return-target runs evaluated Table 1's GC-DT checkpoint, on the study's own seeds.
     checkpoints = list((root / "artifacts" / "grid" / "checkpoints").glob("*/checkpoint.pt"))
     assert len(checkpoints) == 6
     assert {load_checkpoint(p)["train_config"]["lr"] for p in checkpoints} == {2e-4}
+    study = [RunSpec.from_dict(r["spec"]) for r in results.values()]
+    study = [s for s in study if s.eval_seeds == target_seeds(s.seed)]
+    assert sorted(s.target_return for s in study) == [-10.0, 0.0]
+    table1_gcdt = next(e.spec for e in build_grid(TINY, "table1") if e.spec.method == "gcdt")
+    assert {s.training_key() for s in study} == {table1_gcdt.training_key()}
+    assert len({s.key() for s in study} | {table1_gcdt.key()}) == 3
     again = sweep(TINY, store_root=root / "runs", workers=2, progress=False)
-    assert len(again.skipped) == 7 and not again.done and not again.failed
+    assert len(again.skipped) == 9 and not again.done and not again.failed
 
 
 def _start(obs) -> tuple[float, ...]:
@@ -232,7 +246,7 @@ def test_ray_backend_writes_the_same_results(local_sweep, tmp_path, monkeypatch)
     pytest.importorskip("ray")
     monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))  # trains from scratch
     summary = sweep(TINY, backend="ray", store_root=tmp_path / "runs", workers=2, progress=False)
-    assert summary.ok and len(summary.done) == 7
+    assert summary.ok and len(summary.done) == 9
     assert _results(tmp_path / "runs") == _results(local_sweep[0] / "runs")
     backends = {
         json.loads(p.read_text())["execution"]["backend"]
@@ -252,7 +266,7 @@ def test_corrupt_and_foreign_results_are_reported_and_rerun(local_sweep, tmp_pat
     (runs / "0123456789abcdef.json").write_text("{}")
     monkeypatch.setenv("GCDT_ARTIFACTS", str(root / "artifacts"))
     summary = sweep(TINY, store_root=runs, workers=1, progress=False)
-    assert summary.done == [victim.stem] and len(summary.skipped) == 6
+    assert summary.done == [victim.stem] and len(summary.skipped) == 8
     assert any("is not valid JSON" in w for w in summary.warnings)
     assert any("0123456789abcdef.json is not a result of this grid" in w for w in summary.warnings)
     assert RunStore(runs).read(victim.stem).state == "done"
@@ -262,13 +276,13 @@ def test_failing_run_is_recorded_and_the_others_complete(local_sweep, tmp_path, 
     monkeypatch.setenv("GCDT_ARTIFACTS", str(local_sweep[0] / "artifacts"))
     broken = dataclasses.replace(TINY, tqc_budget={**TINY.tqc_budget, "gamma": 0.5})
     summary = sweep(broken, store_root=tmp_path, workers=2, progress=False)
-    assert not summary.ok and len(summary.failed) == 1 and len(summary.done) == 6
+    assert not summary.ok and len(summary.failed) == 1 and len(summary.done) == 8
     failed = json.loads((tmp_path / f"{summary.failed[0]}.json").read_text())
     assert failed["status"] == "failed" and failed["spec"]["method"] == "tqc"
     assert "gamma is not a budget or loop value" in failed["error"]
     assert "Traceback" in failed["traceback"]
     retry = sweep(broken, store_root=tmp_path, workers=2, progress=False)
-    assert retry.failed == summary.failed and len(retry.skipped) == 6  # failed runs re-run
+    assert retry.failed == summary.failed and len(retry.skipped) == 8  # failed runs re-run
 
 
 DRIVER = """
@@ -293,7 +307,7 @@ def test_killed_sweep_resumes_with_only_the_missing_runs(tmp_path):
     os.killpg(driver.pid, signal.SIGKILL)  # the driver and its workers, mid-sweep
     driver.wait()
     first = {p.name: p.stat().st_mtime_ns for p in runs.glob("*.json")}
-    assert 1 <= len(first) < 7
+    assert 1 <= len(first) < 9
     for name in first:  # whatever was written is whole
         assert RunStore(runs).read(Path(name).stem).state == "done"
     done = subprocess.run(
@@ -305,7 +319,7 @@ def test_killed_sweep_resumes_with_only_the_missing_runs(tmp_path):
         timeout=600,
     )
     assert done.returncode == 0, done.stderr
-    assert f"{7 - len(first)} done, {len(first)} skipped, 0 failed" in done.stdout
+    assert f"{9 - len(first)} done, {len(first)} skipped, 0 failed" in done.stdout
     assert {p.name: p.stat().st_mtime_ns for p in runs.glob("*.json") if p.name in first} == first
     assert not [p for p in runs.iterdir() if p.suffix != ".json"]  # no temp files left
 

@@ -6,6 +6,7 @@ import dataclasses
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from gcdt import report
@@ -158,3 +159,58 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
 def test_report_cli_rejects_a_negative_wall_time(capsys):
     assert main(["report", "--profile", "smoke", "--wall-seconds", "-5"]) != 0
     assert "--wall-seconds must be >= 0, got -5.0" in capsys.readouterr().err
+
+
+#: Validation and test success per target of the return-target study's synthetic runs: the
+#: best target on validation (-5) is not the best on test (-10), so a choice made on the test
+#: evaluations would show.
+STUDY = {0.0: (0.5, 0.6), -5.0: (0.9, 0.7), -10.0: (0.8, 0.95)}
+
+
+def test_return_target_study_picks_on_validation_and_scores_on_test(tmp_path):
+    from gcdt.report import targets
+
+    profile = dataclasses.replace(
+        PROFILE,
+        table1=Scope(tasks=("reach",), rewards=("sparse",)),
+        targets=Scope(tasks=("reach",), rewards=("sparse",)),
+        return_targets={"sparse": tuple(STUDY)},
+    )
+    store = RunStore(tmp_path)
+    for entry in build_grid(profile, "targets"):
+        spec = entry.spec
+        evaluations = [
+            {
+                "seed": seed,
+                "success_rate": rate + 0.01 * spec.seed,
+                "mean_return": -20 * (1 - rate),
+                "std_return": 1.0,
+                "episodes": 100,
+            }
+            for seed, rate in zip(spec.eval_seeds, STUDY[spec.target_return], strict=True)
+        ]
+        store.write(
+            spec.key(),
+            {
+                "key": spec.key(),
+                "schema": RUN_SCHEMA,
+                "status": "done",
+                "spec": spec.to_dict(),
+                "evaluations": evaluations,
+                "metrics": {"success_rate": 0.0, "mean_return": 0.0, "episodes": 200},
+            },
+        )
+    runs = tables.load_runs(profile, tmp_path)
+    curve = targets.target_table(runs)
+    assert list(curve["target_return"]) == [0.0, -5.0, -10.0] and set(curve["seeds"]) == {3}
+    assert curve["success_mean"].tolist() == pytest.approx([61.0, 71.0, 96.0])  # test split
+    (best,) = targets.best_targets(runs).to_dict("records")
+    assert best["best_target"] == -5.0  # chosen on validation
+    assert best["best_success_mean"] == pytest.approx(71.0)  # scored on test
+    assert best["zero_success_mean"] == pytest.approx(61.0)
+    assert "| sparse | Reach | -5 | 71.0 [" in targets.best_targets_markdown(pd.DataFrame([best]))
+    fig = targets.target_figure(runs)
+    assert [ax.get_title() for ax in fig.axes[:1]] == ["Sparse reward"]
+    assert len(fig.axes[0].get_lines()) >= 1
+    with pytest.raises(GcdtError, match="unknown split 'train': expected one of validation"):
+        targets.study_runs(runs, "train")

@@ -142,8 +142,9 @@ def tqc_curve(run_dir: Path, fields: tuple[str, ...]) -> list[dict[str, float]]:
 
 
 def checkpoint_dir(spec: RunSpec) -> Path:
-    """Where an offline run keeps its training checkpoint (resumed after an interruption)."""
-    return grid_dir() / "checkpoints" / spec.key()
+    """Where an offline run keeps its training checkpoint (resumed after an interruption);
+    runs that differ only in their evaluation share it."""
+    return grid_dir() / "checkpoints" / spec.training_key()
 
 
 def checkpoint(spec: RunSpec) -> Path:
@@ -154,7 +155,7 @@ def checkpoint(spec: RunSpec) -> Path:
 
     out = checkpoint_dir(spec)
     path = out / CHECKPOINT_NAME
-    with _locked(spec.key()):
+    with _locked(spec.training_key()):
         ckpt = load_checkpoint(path) if path.exists() else None
         if ckpt is None or not ckpt["complete"]:
             method, conditioning = OFFLINE_METHODS[spec.method]

@@ -77,8 +77,9 @@ class CostModel:
     def _set(self, name: str, value: float, source: str) -> None:
         self.rates[name], self.source[name] = value, source
 
-    def estimate(self, spec: RunSpec) -> float:
-        """Seconds for `spec` alone (shared datasets and TQC experts are counted apart)."""
+    def estimate(self, spec: RunSpec, train: bool = True) -> float:
+        """Seconds for `spec` alone (shared datasets and TQC experts are counted apart);
+        without `train`, its evaluation only (another run makes its checkpoint)."""
         r = self.rates
         seconds = r["run_overhead"]
         eval_rate = r["dt_eval_step" if spec.method in DT_METHODS else "eval_step"]
@@ -86,6 +87,8 @@ class CostModel:
         if spec.method == "tqc":
             rate = r.get(f"tqc_step:{spec.tqc.config}", r["tqc_step:paper"])
             return seconds + (spec.tqc.steps or 0) * rate
+        if not train:
+            return seconds
         return seconds + offline_steps(spec) * r["bc_step" if spec.method == "bc" else "dt_step"]
 
     def collection(self, transitions: int) -> float:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from gcdt.errors import GcdtError
-from gcdt.experiments.profiles import EVAL_SEED_STEP, Profile
+from gcdt.experiments.profiles import EVAL_SEED_STEP, Profile, target_seeds
 from gcdt.paths import REPO_ROOT
 
 #: Bump when the meaning of a spec field or of a result file changes: old results re-run.
@@ -25,7 +25,7 @@ from gcdt.paths import REPO_ROOT
 #: on 8 envs (tqc_her.yaml's loop values); episode seeds come from one stream per purpose;
 #: BC's budget follows `Profile.bc_budget`. 5: faster scripted experts (shorter episodes).
 RUN_SCHEMA = 5
-SECTIONS = ("table1", "rq4", "rq5", "ablation")
+SECTIONS = ("table1", "rq4", "rq5", "ablation", "targets")
 #: Method name -> (trainer method, goal conditioning); `tqc` is the online baseline.
 OFFLINE_METHODS = {
     "gcdt": ("dt", "desired+achieved"),
@@ -125,9 +125,17 @@ class RunSpec:
     eval_seeds: tuple[int, ...]
     eval_envs: int
     threads: int  # torch threads; part of the key since float results may depend on it
+    target_return: float = 0.0  # a DT's return-to-go at each evaluation episode's start
 
     def key(self) -> str:
         return content_key({"run": self.to_dict(), "schema": RUN_SCHEMA})
+
+    def training_key(self) -> str:
+        """The key of what the run trains: runs that differ only in how they are evaluated
+        (the return-target study) share one checkpoint."""
+        evaluation = ("eval_timesteps", "eval_seeds", "eval_envs", "target_return")
+        trained = {k: v for k, v in self.to_dict().items() if k not in evaluation}
+        return content_key({"training": trained, "schema": RUN_SCHEMA})
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -149,6 +157,12 @@ class RunSpec:
     @property
     def label(self) -> str:
         """A readable one-line name for listings and progress output."""
+        target = f" at target {self.target_return:g}" if self.target_return else ""
+        where = f"({self._data_label}){target}"
+        return f"{self.method} {self.task}/{self.reward} seed {self.seed} {where}"
+
+    @property
+    def _data_label(self) -> str:
         if self.data is None:
             where = "online"
         elif self.data.is_base:
@@ -157,7 +171,7 @@ class RunSpec:
             where = f"{self.data.size:,} expert subset"
         else:
             where = f"{self.data.size:,} at {self.data.expert_ratio:.0%} expert"
-        return f"{self.method} {self.task}/{self.reward} seed {self.seed} ({where})"
+        return where
 
 
 @dataclass(frozen=True)
@@ -233,8 +247,17 @@ def bc_steps(profile: Profile, task: str, data: DataSpec) -> int | None:
 
 
 def run_spec(
-    profile: Profile, method: str, task: str, reward: str, seed: int, data: DataSpec | None
+    profile: Profile,
+    method: str,
+    task: str,
+    reward: str,
+    seed: int,
+    data: DataSpec | None,
+    target_return: float = 0.0,
+    eval_seeds: tuple[int, ...] | None = None,
 ) -> RunSpec:
+    """A run of `profile`, evaluated on its training seed's evaluation seeds unless
+    `eval_seeds` says otherwise."""
     tqc = None
     if method == "tqc":
         steps = profile.tqc_steps if profile.tqc_steps is not None else profile.dataset_size
@@ -254,7 +277,8 @@ def run_spec(
     elif method != "tqc" and profile.train_steps is not None:
         train_steps = profile.train_steps[task]
     learning_rate = None if method == "tqc" else profile.learning_rate
-    eval_seeds = tuple(seed + EVAL_SEED_STEP * i for i in range(profile.eval_seeds))
+    if eval_seeds is None:
+        eval_seeds = tuple(seed + EVAL_SEED_STEP * i for i in range(profile.eval_seeds))
     return RunSpec(
         method,
         task,
@@ -268,6 +292,7 @@ def run_spec(
         eval_seeds,
         profile.eval_envs,
         profile.cpus_per_run,
+        float(target_return),
     )
 
 
@@ -301,6 +326,13 @@ def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
                     elif section == "ablation":
                         for method in ABLATION_METHODS:
                             add(section, run_spec(p, method, task, reward, seed, full))
+                    elif section == "targets":
+                        # Validation and test evaluations in one run: the study picks a target
+                        # on the first and scores it on the second.
+                        split = target_seeds(seed)
+                        for target in p.return_targets[reward]:
+                            spec = run_spec(p, "gcdt", task, reward, seed, full, target, split)
+                            add(section, spec)
                     elif section == "rq4":
                         for size in p.rq4_sizes:
                             data = data_spec(p, task, size, 1.0)

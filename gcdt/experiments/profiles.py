@@ -1,7 +1,8 @@
 """Scale profiles: every number that sets the size of the experiment grid, in one place.
 
 `paper` is the paper's protocol; `quick` a real, reduced reproduction of Table 1 for a 2-core
-CPU (under 90 minutes); `standard` adds Fig. 3 and Fig. 4 on every task (a few hours); `smoke`
+CPU (under 90 minutes); `standard` adds Fig. 3 and Fig. 4 on every task and the return-target
+study (a few hours); `smoke`
 runs every stage in minutes and its numbers mean nothing.
 `deviations(profile)` is the one text that lists how a profile differs from the paper; the
 README and the reports print it rather than restating it.
@@ -10,6 +11,7 @@ README and the reports print it rather than restating it.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,6 +30,16 @@ BC_BUDGETS = {
 }
 #: A run's evaluation seeds are `seed + EVAL_SEED_STEP * i` for i < `eval_seeds`.
 EVAL_SEED_STEP = 100
+#: The return-target study evaluates training seed s on validation seed s + first and test
+#: seed s + second: apart from every grid evaluation (`Profile` refuses seeds that reach them).
+TARGET_SEED_OFFSETS = (10_000, 20_000)
+
+
+def target_seeds(seed: int) -> tuple[int, int]:
+    """The (validation, test) evaluation seeds of training seed `seed` in the target study."""
+    return seed + TARGET_SEED_OFFSETS[0], seed + TARGET_SEED_OFFSETS[1]
+
+
 ALL_REWARDS = tuple(REWARDS)
 
 
@@ -85,12 +97,22 @@ class Profile:
     tqc_budget: dict[str, Any] = field(default_factory=dict)
     tqc_eval_every: int | None = None  # env steps between learning-curve points (None: 10/run)
     tqc_eval_episodes: int = 20
-    # Which tasks and rewards each section covers (table1_tqc: Table 1's TQC+HER cells).
+    # The return-target study (not in the paper): the target returns each Table 1 GC-DT
+    # checkpoint is evaluated at, per reward (sparse returns are minus the steps to success).
+    return_targets: dict[str, tuple[float, ...]] = field(
+        default_factory=lambda: {
+            "sparse": (0.0, -3.0, -6.0, -9.0, -12.0, -16.0, -20.0, -25.0, -30.0),
+            "dense": (0.0, -0.5, -1.0, -1.5, -2.0, -3.0, -4.0, -6.0),
+        }
+    )
+    # Which tasks and rewards each section covers (table1_tqc: Table 1's TQC+HER cells;
+    # targets: the return-target study, which the paper does not make).
     table1: Scope = Scope()
     table1_tqc: Scope = Scope()
     rq4: Scope = Scope()
     rq5: Scope = Scope()
     ablation: Scope = Scope()
+    targets: Scope = Scope(tasks=())
     # Resources of one run: CPU threads, and the GPU share under Ray (4 runs per GPU).
     cpus_per_run: int = 1
     gpus_per_run: float = 0.25
@@ -105,6 +127,19 @@ class Profile:
             raise GcdtError(
                 f"profile {self.name!r}: unknown BC budget rule {self.bc_budget!r}: expected "
                 f"one of {', '.join(BC_BUDGETS)}"
+            )
+        for reward, targets in self.return_targets.items():
+            if reward not in REWARDS or not all(math.isfinite(t) for t in targets):
+                raise GcdtError(
+                    f"profile {self.name!r}: return_targets must map {', '.join(REWARDS)} to "
+                    f"finite target returns, got {reward!r}: {targets!r}"
+                )
+        last = max(self.seeds) + EVAL_SEED_STEP * (self.eval_seeds - 1)
+        if last >= TARGET_SEED_OFFSETS[0] or min(self.seeds) < 0:
+            raise GcdtError(
+                f"profile {self.name!r}: evaluation seeds reach {last}, the return-target "
+                f"study's from {TARGET_SEED_OFFSETS[0]} on: choose seeds in "
+                f"[0, {TARGET_SEED_OFFSETS[0] - EVAL_SEED_STEP * self.eval_seeds}]"
             )
         evaluated: dict[int, int] = {}  # evaluation seed -> the training seed it belongs to
         for seed in self.seeds:
@@ -176,9 +211,10 @@ STANDARD = dataclasses.replace(
     QUICK,
     name="standard",
     description="quick's Table 1 plus Fig. 3 and Fig. 4 (RQ4, RQ5) on every task with sparse "
-    "rewards, 3 seeds; a few hours on a 2-core CPU",
+    "rewards and the return-target study, 3 seeds; a few hours on a 2-core CPU",
     rq4=Scope(rewards=("sparse",)),
     rq5=Scope(rewards=("sparse",)),
+    targets=Scope(),
 )
 
 SMOKE = dataclasses.replace(
@@ -201,6 +237,8 @@ SMOKE = dataclasses.replace(
     rq4=Scope(rewards=("sparse",)),
     rq5=Scope(rewards=("sparse",)),
     ablation=Scope(rewards=("sparse",)),
+    return_targets={"sparse": (0.0, -10.0), "dense": (0.0, -2.0)},
+    targets=Scope(rewards=("sparse",)),
 )
 
 PROFILES: dict[str, Profile] = {p.name: p for p in (SMOKE, QUICK, STANDARD, PAPER)}

@@ -110,7 +110,7 @@ def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict
         "model_config": ckpt["model_config"],
         "loss_curve": [{k: row[k] for k in ("step", "loss", "lr")} for row in history],
     }
-    return TrainedPolicy(ckpt, spec.task), trained
+    return TrainedPolicy(ckpt, spec.task, target_return=spec.target_return), trained
 
 
 def _evaluate(policy: Any, spec: RunSpec, seed: int) -> dict[str, Any]:

@@ -81,7 +81,7 @@ def plan(
     estimated cost; warnings for files that are not trusted (corrupt results, JSON files of no
     run of this grid)."""
     costs = costs or CostModel.measured()
-    planned, warnings = [], []
+    planned, warnings, trained = [], [], set()
     for entry in build_grid(profile, only):
         if methods is not None and entry.spec.method not in methods:
             continue
@@ -89,9 +89,11 @@ def plan(
         stored = store.read(key)
         if stored.problem:
             warnings.append(f"{stored.problem}: it will be run again")
-        planned.append(
-            PlannedRun(entry, key, stored.state, stored.problem, costs.estimate(entry.spec))
-        )
+        # Runs that share a checkpoint (the return-target study's) pay for training once.
+        train = entry.spec.method == "tqc" or entry.spec.training_key() not in trained
+        trained.add(entry.spec.training_key())
+        estimate = costs.estimate(entry.spec, train=train)
+        planned.append(PlannedRun(entry, key, stored.state, stored.problem, estimate))
     if only is None and methods is None:
         keys = {p.key for p in planned}
         warnings += [

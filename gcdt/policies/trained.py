@@ -12,6 +12,7 @@ step: at this model's size a GPU step costs its kernel launches, not its arithme
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -45,6 +46,10 @@ class TrainedPolicy(Policy):
         super().__init__(ckpt["task"])
         cfg = ckpt["train_config"]
         self.method = ckpt["method"]
+        if not math.isfinite(target_return):
+            raise GcdtError(
+                f"target return must be a finite number (a DT's return-to-go), got {target_return}"
+            )
         if self.method == "bc" and target_return != 0.0:
             raise GcdtError(f"checkpoint {self.path} is BC, which takes no target return")
         self.name = method_label(self.method, cfg["goal_conditioning"])

@@ -1,7 +1,8 @@
 """Tables and figures of the paper from `results/<profile>/` alone: `gcdt report`.
 
-write_report(profile) writes Table 1 and the ablation table (CSV, Markdown, LaTeX) into
-results/<profile>/, Fig. 2-4 and the learning curves (PNG, PDF) into figures/<profile>/, and
+write_report(profile) writes Table 1 and the ablation table (CSV, Markdown, LaTeX) and, where
+the profile makes it, the return-target study (`gcdt.report.targets`) into results/<profile>/,
+Fig. 2-4, the learning curves and the study's figure (PNG, PDF) into figures/<profile>/, and
 results/<profile>/report.md, which also lists the profile's deviations from the paper; both
 folders lie under `gcdt.paths.outputs_root()` (the repository, or a reproduction's own).
 `make reproduce` adds results/<profile>/reproduce.json: its measured wall time. The notebooks'
@@ -26,7 +27,7 @@ from gcdt.paths import (
     write_if_changed,
     write_json_atomic,
 )
-from gcdt.report import figures, tables
+from gcdt.report import figures, tables, targets
 
 README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
 
@@ -125,6 +126,16 @@ def write_tables(profile: Profile, runs) -> list[Path]:
         ):
             write_if_changed(out / f"{name}.{ext}", text)
             written.append(out / f"{name}.{ext}")
+    study = targets.target_table(runs)
+    if not study.empty:  # the return-target study, where the profile makes it
+        best = targets.best_targets(runs)
+        for name, text in (
+            ("return_target.csv", study.to_csv(index=False, float_format="%.4f")),
+            ("best_target.csv", best.to_csv(index=False, float_format="%.4f")),
+            ("best_target.md", targets.best_targets_markdown(best) + "\n"),
+        ):
+            write_if_changed(out / name, text)
+            written.append(out / name)
     return written
 
 
@@ -138,6 +149,7 @@ def write_figures(profile: Profile, runs) -> list[Path]:
         ("fig4_expert_ratio", figures.expert_ratio_figure),
         ("tqc_learning_curves", figures.tqc_learning_curves_figure),
         ("training_loss", figures.training_loss_figure),
+        ("return_target", targets.target_figure),
     ):
         fig = make(runs)
         if fig is not None:

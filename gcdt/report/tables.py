@@ -65,10 +65,12 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
                 "seed": spec.seed,
                 "size": spec.data.size if spec.data else None,
                 "expert_ratio": spec.data.expert_ratio if spec.data else None,
+                "target_return": spec.target_return,
                 "success_rate": metrics["success_rate"],
                 "mean_return": metrics["mean_return"],
                 "episodes": metrics["episodes"],
                 "std_return": _pooled_std(result.get("evaluations", [])),
+                "evaluations": result.get("evaluations", []),
                 "training": result.get("training", {}),
             }
         )

@@ -75,8 +75,10 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
             }
         )
     if not rows:
+        others = len(list(store.root.glob("*.json"))) if store.root.is_dir() else 0
+        earlier = f" (its {others} result files are of an earlier grid)" if others else ""
         raise GcdtError(
-            f"no finished runs of profile {profile.name!r} in {store.root}: run "
+            f"no finished runs of profile {profile.name!r} in {store.root}{earlier}: run "
             f"`gcdt sweep --profile {profile.name}` (or `make reproduce PROFILE={profile.name}`)"
         )
     return pd.DataFrame(rows)

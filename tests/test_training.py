@@ -197,7 +197,7 @@ def test_bad_checkpoints_and_configs(make_dataset, tmp_path):
         TrainConfig(steps=1, lr=0.0)
     with pytest.raises(GcdtError, match="is BC, which takes no target return"):
         make_policy(str(result.checkpoint), "reach", target_return=-5.0)
-    with pytest.raises(GcdtError, match="target return must be a finite number .* got nan"):
+    with pytest.raises(GcdtError, match=r"target return must be a finite number .* got nan"):
         make_policy(str(result.checkpoint), "reach", target_return=float("nan"))
     # The authors' epochs: ceil(#episodes / batch) steps each.
     assert TrainConfig(epochs=3, batch_size=64).total_steps(130) == 9

@@ -198,6 +198,13 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
         help="a DT checkpoint's target return at each episode's start (default 0, the paper's)",
     )
     ev.add_argument(
+        "--goal-region",
+        type=_goal_region,
+        metavar="AXIS=LOW:HIGH,...",
+        help="draw the desired goals from this box only (world coordinates, metres; an empty "
+        "bound is open), e.g. y=0: for one half of the table",
+    )
+    ev.add_argument(
         "--device",
         help="where a DT or BC checkpoint runs: auto (the default, CUDA when present), cpu or cuda",
     )
@@ -220,7 +227,14 @@ def _evaluate(args: argparse.Namespace) -> int:
         check_writable(args.out)  # before the run, not after it
     policy = make_policy(args.policy, args.task, **_policy_kwargs(args))
     config = dataclasses.asdict(_config_from(args, EvaluationConfig))
-    result = evaluate(policy, args.task, args.reward, **config, progress=not args.no_progress)
+    result = evaluate(
+        policy,
+        args.task,
+        args.reward,
+        **config,
+        goal_region=args.goal_region,
+        progress=not args.no_progress,
+    )
     summary = result.summary
     if args.out is not None:
         record = {"command": _command(args), **result.to_dict()}
@@ -238,6 +252,15 @@ def _evaluate(args: argparse.Namespace) -> int:
             else f"no episode finished within {summary['timesteps']} steps"
         )
     return 0
+
+
+def _goal_region(text: str):
+    from gcdt.regions import GoalRegion
+
+    try:
+        return GoalRegion.parse(text)
+    except GcdtError as err:  # argparse turns this into a usage error, exit 2
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def _command(args: argparse.Namespace) -> str:
@@ -301,6 +324,12 @@ def _collect_parser(sub: argparse._SubParsersAction) -> None:
         help="the action recorded: executed (what the env ran) or clean (the expert's action "
         "before its noise, as in DART)",
     )
+    co.add_argument(
+        "--goal-region",
+        type=_goal_region,
+        metavar="AXIS=LOW:HIGH,...",
+        help="draw the desired goals from this box only (world coordinates, metres), e.g. y=0:",
+    )
     co.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     co.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     co.set_defaults(run=_collect)
@@ -321,6 +350,7 @@ def _collect(args: argparse.Namespace) -> int:
         # Both rewards are stored; a trained agent runs under the one it was trained with.
         reward=policy.config().get("reward") or "sparse",
         labels=args.labels,
+        goal_region=args.goal_region,
         progress=not args.no_progress,
     )
     dataset = dataset.with_metadata(command=_command(args))

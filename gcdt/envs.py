@@ -30,6 +30,7 @@ import gymnasium as gym
 import numpy as np
 
 from gcdt.errors import GcdtError
+from gcdt.regions import GoalRegion, restrict_goals
 
 RewardType = Literal["sparse", "dense"]
 REWARDS: tuple[str, ...] = ("sparse", "dense")
@@ -125,17 +126,32 @@ def _register_panda_envs() -> None:
         import panda_gym  # noqa: F401  (registers the Panda*-v3 ids with gymnasium)
 
 
-def make_env(task: str, reward: str, *, render_mode: str = "rgb_array", **kwargs) -> gym.Env:
+def make_env(
+    task: str,
+    reward: str,
+    *,
+    render_mode: str = "rgb_array",
+    goal_region: GoalRegion | None = None,
+    **kwargs,
+) -> gym.Env:
     """One panda-gym env for `task` and `reward` (50-step time limit, 100 for stack).
 
     The default `render_mode="rgb_array"` is headless (pybullet DIRECT): `render()` returns
-    frames and nothing opens a window; `"human"` opens the GUI. Extra kwargs go to the
+    frames and nothing opens a window; `"human"` opens the GUI. With `goal_region` the env
+    draws its desired goals from that region only (`gcdt.regions`). Extra kwargs go to the
     panda-gym constructor (e.g. `render_width`).
     """
     eid = env_id(task, reward)
     _register_panda_envs()
     with _native_output_silenced(1):  # construction connects to pybullet; stepping is not hidden
-        return gym.make(eid, render_mode=render_mode, disable_env_checker=True, **kwargs)
+        env = gym.make(eid, render_mode=render_mode, disable_env_checker=True, **kwargs)
+    if goal_region is not None:
+        try:
+            restrict_goals(env.unwrapped.task, goal_region)
+        except GcdtError:
+            env.close()
+            raise
+    return env
 
 
 def make_vec_env(

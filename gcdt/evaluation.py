@@ -25,6 +25,7 @@ from gcdt.errors import GcdtError
 from gcdt.paths import write_if_changed
 from gcdt.policies.base import Policy
 from gcdt.progress import progress_bar
+from gcdt.regions import GoalRegion
 from gcdt.rollout import VectorRollout
 from gcdt.settings import check_minimums, setting
 
@@ -83,6 +84,7 @@ class EvaluationResult:
     wall_seconds: float  # everything, env start-up included
     stepping_seconds: float  # the stepping loop alone: the throughput measure
     episodes: list[EpisodeRecord] = field(default_factory=list)
+    goal_region: str | None = None  # where the desired goals were drawn from (None: anywhere)
 
     @property
     def summary(self) -> dict[str, Any]:
@@ -106,7 +108,7 @@ class EvaluationResult:
             "timesteps": self.timesteps,
             "wall_seconds": round(self.wall_seconds, 3),
             "steps_per_second": round(self.timesteps / max(self.stepping_seconds, 1e-9), 1),
-        }
+        } | ({"goal_region": self.goal_region} if self.goal_region else {})
 
     def to_dict(self) -> dict[str, Any]:
         """Summary, policy config and every episode record (for result JSON files)."""
@@ -126,6 +128,7 @@ def evaluate(
     episodes: int | None = _PAPER.episodes,
     n_envs: int = _PAPER.n_envs,
     seed: int = _PAPER.seed,
+    goal_region: GoalRegion | None = None,
     progress: bool = True,
 ) -> EvaluationResult:
     """Run `policy` on `task` with `reward` and measure it.
@@ -133,11 +136,12 @@ def evaluate(
     Give either `timesteps` (the paper's protocol; the default, 10,000) or `episodes` (that
     many whole episodes, independent of their lengths); `EvaluationConfig` checks them.
     `n_envs > 1` steps envs in parallel processes, and the policy sees the whole batch each
-    step.
+    step. With `goal_region`, the envs draw their desired goals from that region only.
     """
     config = EvaluationConfig(timesteps=timesteps, episodes=episodes, n_envs=n_envs, seed=seed)
     timesteps = config.total_timesteps()
-    rollout = VectorRollout(policy, task, reward, n_envs, seed)  # validates the rest
+    env_kwargs = None if goal_region is None else {"goal_region": goal_region}
+    rollout = VectorRollout(policy, task, reward, n_envs, seed, env_kwargs=env_kwargs)
 
     records: list[EpisodeRecord] = []
     started = time.perf_counter()
@@ -204,6 +208,7 @@ def evaluate(
         wall_seconds=time.perf_counter() - started,
         stepping_seconds=stepping_seconds,
         episodes=records,
+        goal_region=None if goal_region is None else str(goal_region),
     )
 
 

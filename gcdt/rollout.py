@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from gcdt.envs import check_reward, episode_seed, get_task, make_vec_env
+from gcdt.envs import check_reward, episode_seed, get_task, make_env, make_vec_env
 from gcdt.errors import GcdtError
 from gcdt.policies.base import Policy
 
@@ -81,6 +81,8 @@ class VectorRollout:
         self.n_envs, self.seed, self.stream = int(n_envs), int(seed), stream
         episode_seed(self.seed, 0, stream)  # an unknown stream fails here, before envs start
         self.env_kwargs, self.on_step = dict(env_kwargs or {}), on_step
+        if self.env_kwargs.get("goal_region") is not None:  # a region without goals fails
+            make_env(self.task, reward, goal_region=self.env_kwargs["goal_region"]).close()
         self.stepping_started = 0.0  # perf_counter() once the envs are up and reset
 
     def __enter__(self) -> VectorRollout:

@@ -13,6 +13,7 @@ from gcdt.errors import GcdtError
 from gcdt.policies.base import Policy
 from gcdt.progress import progress_bar
 from gcdt.provenance import package_versions, utc_now
+from gcdt.regions import GoalRegion
 from gcdt.rollout import VectorRollout
 
 #: What a collection records as each state's action (see `collect`).
@@ -28,6 +29,7 @@ def collect(
     n_envs: int = 1,
     reward: str = "sparse",
     labels: str = "executed",
+    goal_region: GoalRegion | None = None,
     progress: bool = True,
 ) -> Dataset:
     """Collect the first episodes of a seeded run whose lengths add up to >= `transitions`.
@@ -42,7 +44,8 @@ def collect(
     policies); the dataset stores both reward types, computed from the goals. `labels` is the
     action recorded for each state: "executed", what the env ran, or "clean", what the
     policy meant before its own exploration noise (DART: the data then teaches the expert's
-    action in the states its noisy execution visits).
+    action in the states its noisy execution visits). With `goal_region`, the envs draw
+    their desired goals from that region only (`gcdt.regions`).
     """
     if labels not in LABELS:
         raise GcdtError(f"unknown action labels {labels!r}: expected one of {', '.join(LABELS)}")
@@ -52,7 +55,10 @@ def collect(
     # Random data and expert data come from seed streams of their own, and evaluation from
     # another one: no collected episode replays another collection's or an evaluation's.
     stream = "random-collection" if policy.name == "random" else "collection"
-    rollout = VectorRollout(policy, task, reward, n_envs, seed, stream=stream)
+    env_kwargs = None if goal_region is None else {"goal_region": goal_region}
+    rollout = VectorRollout(
+        policy, task, reward, n_envs, seed, stream=stream, env_kwargs=env_kwargs
+    )
 
     running: list[dict[str, list[np.ndarray]]] = [_empty_episode() for _ in range(n_envs)]
     finished: dict[int, dict[str, np.ndarray]] = {}
@@ -98,6 +104,7 @@ def collect(
         "seed": int(seed),
         "n_envs": int(n_envs),
         "labels": labels,
+        **({"goal_region": str(goal_region)} if goal_region is not None else {}),
         "transitions_requested": int(transitions),
         "seconds": round(time.perf_counter() - started, 3),
         "stepping_seconds": round(stepping_seconds, 3),

@@ -27,6 +27,7 @@ PROFILE = dataclasses.replace(
     rq4=ALL,
     rq5=ALL,
     ablation=ALL,
+    targets=Scope(tasks=()),  # its runs need evaluations: test_return_target_study_... has its own
 )
 
 
@@ -37,24 +38,18 @@ def _success(spec) -> float:
     return round(0.5 * size * ratio + 0.1 * spec.seed + (0.2 if spec.method == "gcdt" else 0), 4)
 
 
+def _write_result(store: RunStore, spec, metrics: dict, **fields) -> None:
+    """A finished run's result file with the given metrics (and other fields)."""
+    result = {"key": spec.key(), "schema": RUN_SCHEMA, "status": "done", "spec": spec.to_dict()}
+    store.write(spec.key(), {**result, "metrics": metrics, **fields})
+
+
 def _write_runs(root) -> RunStore:
     store = RunStore(root)
     for entry in build_grid(PROFILE):
         spec = entry.spec
-        store.write(
-            spec.key(),
-            {
-                "key": spec.key(),
-                "schema": RUN_SCHEMA,
-                "status": "done",
-                "spec": spec.to_dict(),
-                "metrics": {
-                    "success_rate": _success(spec),
-                    "mean_return": -10 * spec.seed,
-                    "episodes": 20,
-                },
-            },
-        )
+        metrics = {"success_rate": _success(spec), "mean_return": -10 * spec.seed, "episodes": 20}
+        _write_result(store, spec, metrics)
     return store
 
 
@@ -189,17 +184,8 @@ def test_return_target_study_picks_on_validation_and_scores_on_test(tmp_path):
             }
             for seed, rate in zip(spec.eval_seeds, STUDY[spec.target_return], strict=True)
         ]
-        store.write(
-            spec.key(),
-            {
-                "key": spec.key(),
-                "schema": RUN_SCHEMA,
-                "status": "done",
-                "spec": spec.to_dict(),
-                "evaluations": evaluations,
-                "metrics": {"success_rate": 0.0, "mean_return": 0.0, "episodes": 200},
-            },
-        )
+        metrics = {"success_rate": 0.0, "mean_return": 0.0, "episodes": 200}
+        _write_result(store, spec, metrics, evaluations=evaluations)
     runs = tables.load_runs(profile, tmp_path)
     curve = targets.target_table(runs)
     assert list(curve["target_return"]) == [0.0, -5.0, -10.0] and set(curve["seeds"]) == {3}

@@ -30,11 +30,13 @@ from gcdt.experiments import (
 )
 from gcdt.experiments.grid import RUN_SCHEMA
 from gcdt.experiments.profiles import SMOKE, Scope, target_seeds
+from gcdt.regions import GoalRegion
 
 ONE = Scope(tasks=("reach",), rewards=("sparse",))
-#: Nine real runs on Reach in well under a minute: Table 1 (GC-DT, BC, TQC+HER), one RQ4
-#: subset, one RQ5 mixture, the two DT ablations, and two return-target points (one is
-#: Table 1's GC-DT checkpoint at target 0 on the study's seeds, the other at -10).
+#: Thirteen real runs on Reach in about a minute: Table 1 (GC-DT, BC, TQC+HER), one RQ4
+#: subset, one RQ5 mixture, the two DT ablations, two return-target points (one is Table 1's
+#: GC-DT checkpoint at target 0 on the study's seeds, the other at -10), and GC-DT and BC
+#: trained on goals with y <= 0, each evaluated there and at y >= 0.
 TINY = dataclasses.replace(
     SMOKE,
     name="tiny",
@@ -54,6 +56,7 @@ TINY = dataclasses.replace(
     ablation=ONE,
     targets=ONE,
     return_targets={"sparse": (0.0, -10.0)},
+    generalisation=ONE,
 )
 
 
@@ -166,28 +169,32 @@ def local_sweep(tmp_path_factory):
 
 def test_local_sweep_runs_every_run_once(local_sweep):
     root, summary = local_sweep
-    assert summary.ok and len(summary.done) == 9 and not summary.skipped
+    assert summary.ok and len(summary.done) == 13 and not summary.skipped
     results = _results(root / "runs")
-    assert len(results) == 9 and all(r["status"] == "done" for r in results.values())
+    assert len(results) == 13 and all(r["status"] == "done" for r in results.values())
     methods = sorted(r["spec"]["method"] for r in results.values())
-    assert methods == ["bc", "dt", "dt-desired", *["gcdt"] * 5, "tqc"]
+    assert methods == [*["bc"] * 3, "dt", "dt-desired", *["gcdt"] * 7, "tqc"]
     for r in results.values():
         assert r["schema"] == RUN_SCHEMA and r["evaluations"][0]["episodes"] >= 1
         assert 0.0 <= r["metrics"]["success_rate"] <= 1.0
-    # One expert and one random collection, two derived datasets, all content-keyed.
+    # Expert collections (the whole goal range, and one region's), one random collection, two
+    # derived datasets, all content-keyed.
     datasets = list((root / "artifacts" / "grid" / "datasets").glob("*.npz"))
-    assert len(datasets) == 4
+    assert len(datasets) == 5
     # The collections used the profile's expert noise; random actions got none.
     policies = {}
     for path in datasets:
         metadata = load_dataset(path).metadata
-        if metadata["source"] == "collect":  # not a subset or mixture
+        if metadata["source"] == "collect" and "goal_region" not in metadata:
             policies[metadata["policy"]["name"]] = metadata["policy"].get("noise_std")
+        elif "goal_region" in metadata:  # the generalisation study's data: one region's goals
+            region = GoalRegion.parse(metadata["goal_region"])
+            assert region.contains(load_dataset(path).arrays["desired_goal"]).all()
     assert policies == {"scripted": TINY.expert_noise, "random": None} and TINY.expert_noise > 0
     # Every offline run trained at the profile's learning rate, not the trainer's default; the
     # return-target runs evaluated Table 1's GC-DT checkpoint, on the study's own seeds.
     checkpoints = list((root / "artifacts" / "grid" / "checkpoints").glob("*/checkpoint.pt"))
-    assert len(checkpoints) == 6
+    assert len(checkpoints) == 8
     assert {load_checkpoint(p)["train_config"]["lr"] for p in checkpoints} == {2e-4}
     study = [RunSpec.from_dict(r["spec"]) for r in results.values()]
     study = [s for s in study if s.eval_seeds == target_seeds(s.seed)]
@@ -195,8 +202,10 @@ def test_local_sweep_runs_every_run_once(local_sweep):
     table1_gcdt = next(e.spec for e in build_grid(TINY, "table1") if e.spec.method == "gcdt")
     assert {s.training_key() for s in study} == {table1_gcdt.training_key()}
     assert len({s.key() for s in study} | {table1_gcdt.key()}) == 3
+    regions = {(r["spec"]["method"], r["spec"]["eval_region"]) for r in results.values()}
+    assert {(m, g) for m in ("gcdt", "bc") for g in TINY.goal_regions} <= regions
     again = sweep(TINY, store_root=root / "runs", workers=2, progress=False)
-    assert len(again.skipped) == 9 and not again.done and not again.failed
+    assert len(again.skipped) == 13 and not again.done and not again.failed
 
 
 def _start(obs) -> tuple[float, ...]:
@@ -227,11 +236,18 @@ def test_evaluation_never_replays_a_training_instance(local_sweep):
         }
         evaluated = set()
         for path in (root / "runs").glob("*.json"):
-            for e in json.loads(path.read_text())["evaluations"]:
+            result = json.loads(path.read_text())
+            region = result["spec"]["eval_region"]  # the study's envs draw goals from it
+            evaluator = env
+            if region is not None:
+                evaluator = make_env("reach", "sparse", goal_region=GoalRegion.parse(region))
+            for e in result["evaluations"]:
                 evaluated |= {
-                    _start(env.reset(seed=episode_seed(e["seed"], j))[0])
+                    _start(evaluator.reset(seed=episode_seed(e["seed"], j))[0])
                     for j in range(e["episodes"])
                 }
+            if evaluator is not env:
+                evaluator.close()
         # The comparison can fail: an episode reset with an expert collection's seed starts
         # where that collection's episode started.
         replayed = _start(env.reset(seed=episode_seed(TINY.data_seed, 0, "collection"))[0])
@@ -246,7 +262,7 @@ def test_ray_backend_writes_the_same_results(local_sweep, tmp_path, monkeypatch)
     pytest.importorskip("ray")
     monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))  # trains from scratch
     summary = sweep(TINY, backend="ray", store_root=tmp_path / "runs", workers=2, progress=False)
-    assert summary.ok and len(summary.done) == 9
+    assert summary.ok and len(summary.done) == 13
     assert _results(tmp_path / "runs") == _results(local_sweep[0] / "runs")
     backends = {
         json.loads(p.read_text())["execution"]["backend"]
@@ -266,7 +282,7 @@ def test_corrupt_and_foreign_results_are_reported_and_rerun(local_sweep, tmp_pat
     (runs / "0123456789abcdef.json").write_text("{}")
     monkeypatch.setenv("GCDT_ARTIFACTS", str(root / "artifacts"))
     summary = sweep(TINY, store_root=runs, workers=1, progress=False)
-    assert summary.done == [victim.stem] and len(summary.skipped) == 8
+    assert summary.done == [victim.stem] and len(summary.skipped) == 12
     assert any("is not valid JSON" in w for w in summary.warnings)
     assert any("0123456789abcdef.json is not a result of this grid" in w for w in summary.warnings)
     assert RunStore(runs).read(victim.stem).state == "done"
@@ -276,13 +292,13 @@ def test_failing_run_is_recorded_and_the_others_complete(local_sweep, tmp_path, 
     monkeypatch.setenv("GCDT_ARTIFACTS", str(local_sweep[0] / "artifacts"))
     broken = dataclasses.replace(TINY, tqc_budget={**TINY.tqc_budget, "gamma": 0.5})
     summary = sweep(broken, store_root=tmp_path, workers=2, progress=False)
-    assert not summary.ok and len(summary.failed) == 1 and len(summary.done) == 8
+    assert not summary.ok and len(summary.failed) == 1 and len(summary.done) == 12
     failed = json.loads((tmp_path / f"{summary.failed[0]}.json").read_text())
     assert failed["status"] == "failed" and failed["spec"]["method"] == "tqc"
     assert "gamma is not a budget or loop value" in failed["error"]
     assert "Traceback" in failed["traceback"]
     retry = sweep(broken, store_root=tmp_path, workers=2, progress=False)
-    assert retry.failed == summary.failed and len(retry.skipped) == 8  # failed runs re-run
+    assert retry.failed == summary.failed and len(retry.skipped) == 12  # failed runs re-run
 
 
 DRIVER = """
@@ -307,7 +323,7 @@ def test_killed_sweep_resumes_with_only_the_missing_runs(tmp_path):
     os.killpg(driver.pid, signal.SIGKILL)  # the driver and its workers, mid-sweep
     driver.wait()
     first = {p.name: p.stat().st_mtime_ns for p in runs.glob("*.json")}
-    assert 1 <= len(first) < 9
+    assert 1 <= len(first) < 13
     for name in first:  # whatever was written is whole
         assert RunStore(runs).read(Path(name).stem).state == "done"
     done = subprocess.run(
@@ -319,7 +335,7 @@ def test_killed_sweep_resumes_with_only_the_missing_runs(tmp_path):
         timeout=600,
     )
     assert done.returncode == 0, done.stderr
-    assert f"{9 - len(first)} done, {len(first)} skipped, 0 failed" in done.stdout
+    assert f"{13 - len(first)} done, {len(first)} skipped, 0 failed" in done.stdout
     assert {p.name: p.stat().st_mtime_ns for p in runs.glob("*.json") if p.name in first} == first
     assert not [p for p in runs.iterdir() if p.suffix != ".json"]  # no temp files left
 

@@ -32,6 +32,7 @@ from gcdt.data import Dataset, collect, load_dataset, mix, subset
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import OFFLINE_METHODS, DataSpec, RunSpec, TQCSpec, file_digest
 from gcdt.paths import REPO_ROOT, artifacts_dir
+from gcdt.regions import GoalRegion
 
 if TYPE_CHECKING:
     from gcdt.policies import Policy
@@ -131,6 +132,7 @@ def _collect(spec: DataSpec) -> Dataset:
         n_envs=spec.collect_envs,
         reward=reward,
         labels=spec.expert_labels,
+        goal_region=None if spec.goal_region is None else GoalRegion.parse(spec.goal_region),
         progress=False,
     )
 

@@ -25,7 +25,9 @@ from gcdt.paths import REPO_ROOT
 #: on 8 envs (tqc_her.yaml's loop values); episode seeds come from one stream per purpose;
 #: BC's budget follows `Profile.bc_budget`. 5: faster scripted experts (shorter episodes).
 RUN_SCHEMA = 5
-SECTIONS = ("table1", "rq4", "rq5", "ablation", "targets")
+SECTIONS = ("table1", "rq4", "rq5", "ablation", "targets", "generalisation")
+#: The goal-generalisation study's methods: both learn from the same region's expert data.
+GENERALISATION_METHODS = ("gcdt", "bc")
 #: Method name -> (trainer method, goal conditioning); `tqc` is the online baseline.
 OFFLINE_METHODS = {
     "gcdt": ("dt", "desired+achieved"),
@@ -80,6 +82,9 @@ class DataSpec:
     #: With expert "tqc:PATH" (a published agent): the zip's content hash, so that another
     #: agent at the same path makes other data.
     expert_digest: str | None = None
+    #: The goal region (`gcdt.regions.GoalRegion` text) the expert collection's goals come
+    #: from; None: the task's whole goal range.
+    goal_region: str | None = None
 
     def key(self) -> str:
         return content_key({"data": dataclasses.asdict(self), "schema": RUN_SCHEMA})
@@ -105,6 +110,7 @@ class DataSpec:
                 expert_noise=0.0,
                 expert_labels="executed",
                 expert_digest=None,
+                goal_region=None,
             )
         return dataclasses.replace(self, size=self.base_size, expert_ratio=1.0)
 
@@ -126,6 +132,7 @@ class RunSpec:
     eval_envs: int
     threads: int  # torch threads; part of the key since float results may depend on it
     target_return: float = 0.0  # a DT's return-to-go at each evaluation episode's start
+    eval_region: str | None = None  # the goal region evaluated in (None: the whole range)
 
     def key(self) -> str:
         return content_key({"run": self.to_dict(), "schema": RUN_SCHEMA})
@@ -133,7 +140,7 @@ class RunSpec:
     def training_key(self) -> str:
         """The key of what the run trains: runs that differ only in how they are evaluated
         (the return-target study) share one checkpoint."""
-        evaluation = ("eval_timesteps", "eval_seeds", "eval_envs", "target_return")
+        evaluation = ("eval_timesteps", "eval_seeds", "eval_envs", "target_return", "eval_region")
         trained = {k: v for k, v in self.to_dict().items() if k not in evaluation}
         return content_key({"training": trained, "schema": RUN_SCHEMA})
 
@@ -158,6 +165,8 @@ class RunSpec:
     def label(self) -> str:
         """A readable one-line name for listings and progress output."""
         target = f" at target {self.target_return:g}" if self.target_return else ""
+        if self.eval_region is not None:
+            target += f" evaluated in {self.eval_region}"
         where = f"({self._data_label}){target}"
         return f"{self.method} {self.task}/{self.reward} seed {self.seed} {where}"
 
@@ -167,6 +176,8 @@ class RunSpec:
             where = "online"
         elif self.data.is_base:
             where = f"{self.data.size:,} expert"
+            if self.data.goal_region is not None:
+                where += f" with goals in {self.data.goal_region}"
         elif self.data.expert_ratio == 1.0:
             where = f"{self.data.size:,} expert subset"
         else:
@@ -202,7 +213,9 @@ def expert_tqc_spec(profile: Profile, task: str) -> TQCSpec:
     )
 
 
-def data_spec(profile: Profile, task: str, size: int, expert_ratio: float) -> DataSpec:
+def data_spec(
+    profile: Profile, task: str, size: int, expert_ratio: float, goal_region: str | None = None
+) -> DataSpec:
     expert, noise, digest = profile.expert, float(profile.expert_noise), None
     if task in profile.expert_agents:  # a published agent collects this task's expert data
         expert, noise = f"tqc:{profile.expert_agents[task]}", 0.0
@@ -220,6 +233,7 @@ def data_spec(profile: Profile, task: str, size: int, expert_ratio: float) -> Da
         profile.data_seed,
         profile.collect_envs,
         digest,
+        goal_region,
     )
 
 
@@ -255,6 +269,7 @@ def run_spec(
     data: DataSpec | None,
     target_return: float = 0.0,
     eval_seeds: tuple[int, ...] | None = None,
+    eval_region: str | None = None,
 ) -> RunSpec:
     """A run of `profile`, evaluated on its training seed's evaluation seeds unless
     `eval_seeds` says otherwise."""
@@ -293,6 +308,7 @@ def run_spec(
         profile.eval_envs,
         profile.cpus_per_run,
         float(target_return),
+        eval_region,
     )
 
 
@@ -333,6 +349,16 @@ def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
                         for target in p.return_targets[reward]:
                             spec = run_spec(p, "gcdt", task, reward, seed, full, target, split)
                             add(section, spec)
+                    elif section == "generalisation":
+                        # Trained on one region's goals, evaluated inside it and outside it.
+                        inside, outside = p.goal_regions
+                        data = data_spec(p, task, p.dataset_size, 1.0, goal_region=inside)
+                        for method in GENERALISATION_METHODS:
+                            for region in (inside, outside):
+                                spec = run_spec(
+                                    p, method, task, reward, seed, data, eval_region=region
+                                )
+                                add(section, spec)
                     elif section == "rq4":
                         for size in p.rq4_sizes:
                             data = data_spec(p, task, size, 1.0)

@@ -2,7 +2,7 @@
 
 `paper` is the paper's protocol; `quick` a real, reduced reproduction of Table 1 for a 2-core
 CPU (under 90 minutes); `standard` adds Fig. 3 and Fig. 4 on every task and the return-target
-study (a few hours); `smoke`
+and goal-generalisation studies (a few hours); `smoke`
 runs every stage in minutes and its numbers mean nothing.
 `deviations(profile)` is the one text that lists how a profile differs from the paper; the
 README and the reports print it rather than restating it.
@@ -19,6 +19,7 @@ from gcdt.baselines.tqc_her import BACKENDS, load_tqc_config
 from gcdt.data.collect import LABELS
 from gcdt.envs import REWARDS
 from gcdt.errors import GcdtError
+from gcdt.regions import GoalRegion
 
 PAPER_TASKS = ("reach", "push", "pick_and_place")
 #: How BC's training budget is set against the DT's, the rule named by `Profile.bc_budget`.
@@ -113,6 +114,10 @@ class Profile:
     rq5: Scope = Scope()
     ablation: Scope = Scope()
     targets: Scope = Scope(tasks=())
+    # The goal-generalisation study (not in the paper): GC-DT and BC learn from expert data
+    # whose goals lie in the first region (gcdt.regions text) and are evaluated in both.
+    goal_regions: tuple[str, str] = ("y=:0", "y=0:")
+    generalisation: Scope = Scope(tasks=())
     # Resources of one run: CPU threads, and the GPU share under Ray (4 runs per GPU).
     cpus_per_run: int = 1
     gpus_per_run: float = 0.25
@@ -134,6 +139,8 @@ class Profile:
                     f"profile {self.name!r}: return_targets must map {', '.join(REWARDS)} to "
                     f"finite target returns, got {reward!r}: {targets!r}"
                 )
+        for text in self.goal_regions:
+            GoalRegion.parse(text)  # a malformed region fails here, with its reason
         last = max(self.seeds) + EVAL_SEED_STEP * (self.eval_seeds - 1)
         if last >= TARGET_SEED_OFFSETS[0] or min(self.seeds) < 0:
             raise GcdtError(
@@ -212,10 +219,12 @@ STANDARD = dataclasses.replace(
     QUICK,
     name="standard",
     description="quick's Table 1 plus Fig. 3 and Fig. 4 (RQ4, RQ5) on every task with sparse "
-    "rewards and the return-target study, 3 seeds; a few hours on a 2-core CPU",
+    "rewards and two studies beyond the paper (the return target, goals outside the training "
+    "region), 3 seeds; a few hours on a 2-core CPU",
     rq4=Scope(rewards=("sparse",)),
     rq5=Scope(rewards=("sparse",)),
     targets=Scope(),
+    generalisation=Scope(rewards=("sparse",)),
 )
 
 SMOKE = dataclasses.replace(
@@ -240,6 +249,7 @@ SMOKE = dataclasses.replace(
     ablation=Scope(rewards=("sparse",)),
     return_targets={"sparse": (0.0, -10.0), "dense": (0.0, -2.0)},
     targets=Scope(rewards=("sparse",)),
+    generalisation=Scope(tasks=("push",), rewards=("sparse",)),
 )
 
 PROFILES: dict[str, Profile] = {p.name: p for p in (SMOKE, QUICK, STANDARD, PAPER)}

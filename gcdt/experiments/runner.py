@@ -24,6 +24,7 @@ from gcdt.experiments.grid import RUN_SCHEMA, RunSpec
 from gcdt.experiments.store import RunStore
 from gcdt.paths import ARTIFACTS_ENV
 from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_now
+from gcdt.regions import GoalRegion
 
 #: What a TQC+HER learning-curve point keeps (its timings depend on the machine, not the run).
 TQC_CURVE_FIELDS = ("env_steps", "success_rate", "mean_return", "episodes")
@@ -123,6 +124,7 @@ def _evaluate(policy: Any, spec: RunSpec, seed: int) -> dict[str, Any]:
         timesteps=spec.eval_timesteps,
         n_envs=spec.eval_envs,
         seed=seed,
+        goal_region=None if spec.eval_region is None else GoalRegion.parse(spec.eval_region),
         progress=False,
     ).summary
     keep = (

@@ -1,8 +1,9 @@
 """Tables and figures of the paper from `results/<profile>/` alone: `gcdt report`.
 
 write_report(profile) writes Table 1 and the ablation table (CSV, Markdown, LaTeX) and, where
-the profile makes it, the return-target study (`gcdt.report.targets`) into results/<profile>/,
-Fig. 2-4, the learning curves and the study's figure (PNG, PDF) into figures/<profile>/, and
+the profile makes them, the return-target and goal-generalisation studies
+(`gcdt.report.targets`, `gcdt.report.generalisation`) into results/<profile>/, Fig. 2-4, the
+learning curves and the studies' figures (PNG, PDF) into figures/<profile>/, and
 results/<profile>/report.md, which also lists the profile's deviations from the paper; both
 folders lie under `gcdt.paths.outputs_root()` (the repository, or a reproduction's own).
 `make reproduce` adds results/<profile>/reproduce.json: its measured wall time. The notebooks'
@@ -27,7 +28,7 @@ from gcdt.paths import (
     write_if_changed,
     write_json_atomic,
 )
-from gcdt.report import figures, tables, targets
+from gcdt.report import figures, generalisation, tables, targets
 
 README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
 
@@ -136,6 +137,14 @@ def write_tables(profile: Profile, runs) -> list[Path]:
         ):
             write_if_changed(out / name, text)
             written.append(out / name)
+    regions = generalisation.generalisation_table(runs)
+    if not regions.empty:  # the goal-generalisation study, where the profile makes it
+        for name, text in (
+            ("generalisation.csv", regions.to_csv(index=False, float_format="%.4f")),
+            ("generalisation.md", generalisation.generalisation_markdown(regions) + "\n"),
+        ):
+            write_if_changed(out / name, text)
+            written.append(out / name)
     return written
 
 
@@ -150,6 +159,7 @@ def write_figures(profile: Profile, runs) -> list[Path]:
         ("tqc_learning_curves", figures.tqc_learning_curves_figure),
         ("training_loss", figures.training_loss_figure),
         ("return_target", targets.target_figure),
+        ("goal_generalisation", generalisation.generalisation_figure),
     ):
         fig = make(runs)
         if fig is not None:

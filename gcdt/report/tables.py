@@ -66,6 +66,8 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
                 "size": spec.data.size if spec.data else None,
                 "expert_ratio": spec.data.expert_ratio if spec.data else None,
                 "target_return": spec.target_return,
+                "eval_region": spec.eval_region,
+                "train_region": spec.data.goal_region if spec.data else None,
                 "success_rate": metrics["success_rate"],
                 "mean_return": metrics["mean_return"],
                 "episodes": metrics["episodes"],

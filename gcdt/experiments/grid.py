@@ -164,11 +164,10 @@ class RunSpec:
     @property
     def label(self) -> str:
         """A readable one-line name for listings and progress output."""
-        target = f" at target {self.target_return:g}" if self.target_return else ""
+        how = f" at target {self.target_return:g}" if self.target_return else ""
         if self.eval_region is not None:
-            target += f" evaluated in {self.eval_region}"
-        where = f"({self._data_label}){target}"
-        return f"{self.method} {self.task}/{self.reward} seed {self.seed} {where}"
+            how += f" evaluated in {self.eval_region}"
+        return f"{self.method} {self.task}/{self.reward} seed {self.seed} ({self._data_label}){how}"
 
     @property
     def _data_label(self) -> str:

@@ -45,6 +45,18 @@ def save(fig: plt.Figure, out_dir: str | Path, name: str) -> list[Path]:
     return paths
 
 
+def reward_panels(
+    rewards: set[str], rows: int = 1, width: float = 5.0, height: float = 3.6, **kwargs
+) -> tuple[plt.Figure, list, list[str]]:
+    """A figure with one column of `rows` panels per reward in `rewards` (dense first, as in
+    the paper's tables); returns it, its axes ([rows][columns]) and the rewards in order."""
+    ordered = [r for r in ("dense", "sparse") if r in rewards]
+    fig, axes = plt.subplots(
+        rows, len(ordered), figsize=(width * len(ordered), height), squeeze=False, **kwargs
+    )
+    return fig, axes, ordered
+
+
 def _success_panels(
     runs: pd.DataFrame, section: str, x: str, xlabel: str, scale: float = 1.0
 ) -> plt.Figure | None:
@@ -53,10 +65,7 @@ def _success_panels(
     sel = runs[runs["sections"].apply(lambda s: section in s) & (runs["method"] == "gcdt")]
     if sel.empty:
         return None
-    rewards = [r for r in ("dense", "sparse") if r in set(sel["reward"])]
-    fig, axes = plt.subplots(
-        1, len(rewards), figsize=(5 * len(rewards), 3.6), squeeze=False, sharey=True
-    )
+    fig, axes, rewards = reward_panels(set(sel["reward"]), sharey=True)
     for ax, reward in zip(axes[0], rewards, strict=True):
         for task in TASK_NAMES:
             cell = sel[(sel["reward"] == reward) & (sel["task"] == task)]

@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from gcdt.report.figures import reward_panels
 from gcdt.report.tables import METHOD_NAMES, TASK_NAMES, aggregate
 
 
@@ -56,10 +57,7 @@ def generalisation_figure(runs: pd.DataFrame) -> plt.Figure | None:
     table = generalisation_table(runs)
     if table.empty:
         return None
-    rewards = [r for r in ("sparse", "dense") if r in set(table["reward"])]
-    fig, axes = plt.subplots(
-        1, len(rewards), figsize=(6 * len(rewards), 3.8), squeeze=False, sharey=True
-    )
+    fig, axes, rewards = reward_panels(set(table["reward"]), width=6.0, height=3.8, sharey=True)
     for ax, reward in zip(axes[0], rewards, strict=True):
         block = table[table["reward"] == reward]
         groups = list(block.groupby(["task", "method"], sort=False))

@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from gcdt.errors import GcdtError
+from gcdt.report.figures import reward_panels
 from gcdt.report.tables import TASK_NAMES, aggregate
 
 #: Index of each split in a study run's evaluations (its `eval_seeds` order).
@@ -106,10 +107,7 @@ def target_figure(runs: pd.DataFrame) -> plt.Figure | None:
     table = target_table(runs)
     if table.empty:
         return None
-    rewards = [r for r in ("sparse", "dense") if r in set(table["reward"])]
-    fig, axes = plt.subplots(
-        2, len(rewards), figsize=(5 * len(rewards), 6.4), squeeze=False, sharex="col"
-    )
+    fig, axes, rewards = reward_panels(set(table["reward"]), rows=2, height=6.4, sharex="col")
     for col, reward in enumerate(rewards):
         for task in TASK_NAMES:
             cell = table[(table["reward"] == reward) & (table["task"] == task)]

@@ -139,7 +139,8 @@ class RunSpec:
 
     def training_key(self) -> str:
         """The key of what the run trains: runs that differ only in how they are evaluated
-        (the return-target study) share one checkpoint."""
+        (the return-target study's targets, the generalisation study's regions) share one
+        checkpoint."""
         evaluation = ("eval_timesteps", "eval_seeds", "eval_envs", "target_return", "eval_region")
         trained = {k: v for k, v in self.to_dict().items() if k not in evaluation}
         return content_key({"training": trained, "schema": RUN_SCHEMA})

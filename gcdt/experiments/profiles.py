@@ -1,9 +1,9 @@
 """Scale profiles: every number that sets the size of the experiment grid, in one place.
 
 `paper` is the paper's protocol; `quick` a real, reduced reproduction of Table 1 for a 2-core
-CPU (under 90 minutes); `standard` adds Fig. 3 and Fig. 4 on every task and the return-target
-and goal-generalisation studies (a few hours); `smoke`
-runs every stage in minutes and its numbers mean nothing.
+CPU (1.3 h by the dry run's estimate); `standard` adds Fig. 3 and Fig. 4 on every task and the
+return-target and goal-generalisation studies (a few hours); `smoke` runs every stage in
+minutes and its numbers mean nothing.
 `deviations(profile)` is the one text that lists how a profile differs from the paper; the
 README and the reports print it rather than restating it.
 """
@@ -181,8 +181,8 @@ PAPER = Profile(
 QUICK = dataclasses.replace(
     PAPER,
     name="quick",
-    description="a real, reduced reproduction of Table 1 (3 seeds) on a 2-core CPU in under "
-    "90 minutes",
+    description="a real, reduced reproduction of Table 1 (3 seeds) on a 2-core CPU, about "
+    "1.3 h by the dry run's estimate",
     expert="scripted",
     # Noisy demonstrations (as in DART, Laskey et al. 2017), the executed action as label.
     # Chosen on held-out seeds before the grid ran (results/quick_checks/README.md): GC-DT on

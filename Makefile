@@ -40,7 +40,7 @@ $(STAMP): environment/requirements.txt pyproject.toml
 	@touch $@
 
 test: install
-	@echo "make test: the suite, then every notebook (nbval); about 4 min on 2 cores"
+	@echo "make test: the suite, then every notebook (nbval); about 15 min on 2 cores"
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 lint: install

@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 
 from gcdt.errors import GcdtError
-from gcdt.regions import GoalRegion, restrict_goals
+from gcdt.regions import GoalRegion, goal_box, restrict_goals
 
 RewardType = Literal["sparse", "dense"]
 REWARDS: tuple[str, ...] = ("sparse", "dense")
@@ -152,6 +152,16 @@ def make_env(
             env.close()
             raise
     return env
+
+
+@functools.cache
+def goal_range(task: str) -> tuple[np.ndarray, np.ndarray]:
+    """The world-coordinate box `task` draws its desired goals from (low, high)."""
+    env = make_env(task, "sparse")
+    try:
+        return goal_box(env.unwrapped.task)
+    finally:
+        env.close()
 
 
 def make_vec_env(

@@ -25,8 +25,8 @@ from gcdt.errors import GcdtError
 from gcdt.paths import write_if_changed
 from gcdt.policies.base import Policy
 from gcdt.progress import progress_bar
-from gcdt.regions import GoalRegion
-from gcdt.rollout import VectorRollout
+from gcdt.regions import GoalRegion, check_goal
+from gcdt.rollout import VectorRollout, VectorStep
 from gcdt.settings import check_minimums, setting
 
 DEFAULT_TIMESTEPS = 10_000  # the paper's evaluation budget per (run, seed)
@@ -212,6 +212,41 @@ def evaluate(
     )
 
 
+@dataclass(frozen=True)
+class Recording:
+    """One rendered episode, as `record_rollout` saw it."""
+
+    frames: list[np.ndarray]  # [size, size, 3] uint8: the start, then after each step
+    goal: np.ndarray  # the desired goal, world coordinates
+    distances: np.ndarray  # achieved-to-desired goal distance at each frame, [steps + 1]
+    rewards: np.ndarray  # [steps]
+    success: bool  # the evaluator's rule: the success condition held at some step
+
+    @property
+    def steps(self) -> int:
+        return len(self.rewards)
+
+    @property
+    def ret(self) -> float:  # named as in `EpisodeRecord`
+        return float(self.rewards.sum())
+
+    def gif(self, fps: int = 12) -> bytes:
+        """The frames as an animated GIF, looping."""
+        from PIL import Image
+
+        images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in self.frames]
+        out = io.BytesIO()
+        images[0].save(
+            out,
+            format="GIF",
+            save_all=True,
+            append_images=images[1:],
+            duration=int(1000 / fps),
+            loop=0,
+        )
+        return out.getvalue()
+
+
 def record_rollout(
     policy: Policy,
     task: str,
@@ -222,19 +257,27 @@ def record_rollout(
     size: int = 360,
     fps: int = 12,
     goal: np.ndarray | None = None,
-) -> list[np.ndarray]:
+) -> Recording:
     """Render one episode headless (`rgb_array`) and, with `path`, save it as an animated GIF.
 
     The episode is the run's episode 0 for `seed`, the same one `evaluate(seed=seed)` starts
-    with; `goal` replaces its desired goal (and moves the target marker). Returns the frames,
-    `[size, size, 3]` uint8 each.
+    with; `goal` replaces its desired goal (and moves the target marker) and must lie in the
+    task's goal range. Afterwards a DT policy still holds the episode's last context (its
+    `attention()` shows the final step).
     """
-    from PIL import Image
-
     frames: list[np.ndarray] = []
+    distances: list[float] = []
+    rewards: list[float] = []
+    success = False
 
-    def render(_: object = None) -> None:  # also the last frame, before the env resets
+    def render(step: VectorStep | None = None) -> None:  # also the last frame, before reset
+        nonlocal success
+        obs = rollout.obs if step is None else step.next_obs
         frames.append(rollout.envs.render()[0])
+        distances.append(float(goal_distance(obs["achieved_goal"][0], obs["desired_goal"][0])))
+        if step is not None:
+            rewards.append(float(step.reward[0]))
+            success |= bool(step.success[0])
 
     size_kwargs = {"render_width": size, "render_height": size}
     rollout = VectorRollout(policy, task, reward, 1, seed, env_kwargs=size_kwargs, on_step=render)
@@ -242,30 +285,27 @@ def record_rollout(
         if goal is not None:
             obs = _set_goal(rollout.envs.envs[0], np.asarray(goal, dtype=np.float64))
             rollout.obs = {k: v[None] for k, v in obs.items()}
+        desired = rollout.obs["desired_goal"][0].astype(np.float64)
         render()
         while not rollout.step().done[0]:
             pass
+    recording = Recording(
+        frames=frames,
+        goal=desired,
+        distances=np.asarray(distances),
+        rewards=np.asarray(rewards, dtype=np.float32),
+        success=success,
+    )
     if path is not None:
-        images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
-        gif = io.BytesIO()
-        images[0].save(
-            gif,
-            format="GIF",
-            save_all=True,
-            append_images=images[1:],
-            duration=int(1000 / fps),
-            loop=0,
-        )
-        write_if_changed(path, gif.getvalue())  # atomic; an unchanged GIF is left untouched
-    return frames
+        write_if_changed(path, recording.gif(fps))  # atomic; an unchanged GIF is left untouched
+    return recording
 
 
 def _set_goal(env, goal: np.ndarray) -> dict[str, np.ndarray]:
     """Give a freshly reset panda-gym env another desired goal; its new observation, built
     from the robot's and the task's public getters as panda-gym's `RobotTaskEnv` builds it."""
     robot, task = env.unwrapped.robot, env.unwrapped.task
-    if goal.shape != task.get_goal().shape:
-        raise GcdtError(f"goal must have {task.get_goal().size} coordinates, got {goal.tolist()}")
+    check_goal(task, goal)
     task.goal = goal
     env.unwrapped.sim.set_base_pose("target", goal, np.array([0.0, 0.0, 0.0, 1.0]))
     return {

@@ -84,16 +84,32 @@ def goal_box(task: Any) -> tuple[np.ndarray, np.ndarray]:
     return task.goal_range_low + offset, task.goal_range_high + offset
 
 
+def _box_text(low: np.ndarray, high: np.ndarray) -> str:
+    return ", ".join(f"{a} [{lo:.3f}, {hi:.3f}]" for a, lo, hi in zip(AXES, low, high, strict=True))
+
+
+def check_goal(task: Any, goal: np.ndarray) -> None:
+    """Refuse a desired goal that `task` (a panda-gym task) could never draw itself."""
+    goal = np.asarray(goal, dtype=np.float64)
+    low, high = goal_box(task)
+    if goal.shape != low.shape or not np.all(np.isfinite(goal)):
+        raise GcdtError(f"a goal is {low.size} finite coordinates x, y, z, got {goal.tolist()}")
+    if np.any(goal < low - 1e-6) or np.any(goal > high + 1e-6):  # float32 slider round-off
+        where = ", ".join(f"{v:.3f}" for v in goal)
+        raise GcdtError(
+            f"goal ({where}) lies outside {type(task).__name__}'s goal range: "
+            f"{_box_text(low, high)}"
+        )
+
+
 def restrict_goals(task: Any, region: GoalRegion) -> None:
     """Make `task` draw its goals from its box intersected with `region` (in place)."""
     low, high = goal_box(task)
     new_low, new_high = np.maximum(low, region.low), np.minimum(high, region.high)
     if np.any(new_low > new_high):
-        box = ", ".join(
-            f"{a} [{lo:.3f}, {hi:.3f}]" for a, lo, hi in zip(AXES, low, high, strict=True)
-        )
         raise GcdtError(
-            f"goal region {region} contains no goal of this task: its goals lie in {box}"
+            f"goal region {region} contains no goal of this task: its goals lie in "
+            f"{_box_text(low, high)}"
         )
     # PickAndPlace puts 30 % of its goals on the table whatever its box says: a region above
     # the table would not hold them.

@@ -140,12 +140,18 @@ def test_policy_trained_with_another_reward_rejected(zero_policy, monkeypatch):
 
 def test_record_rollout_writes_gif(tmp_path):
     path = tmp_path / "reach.gif"
-    frames = record_rollout(ScriptedExpert("reach"), "reach", "sparse", seed=0, path=path, size=64)
-    assert len(frames) >= 2 and frames[0].shape == (64, 64, 3)
+    rec = record_rollout(ScriptedExpert("reach"), "reach", "sparse", seed=0, path=path, size=64)
+    frames = rec.frames
+    assert len(frames) == rec.steps + 1 >= 2 and frames[0].shape == (64, 64, 3)
     assert frames[0].dtype == np.uint8 and frames[0].std() > 0  # a real picture, not blank
     gif = Image.open(path)
     assert gif.n_frames == len(frames)
     assert not list(tmp_path.glob("*.tmp"))
+    # The same episode as the evaluator's episode 0: same success, return and length.
+    first = evaluate(ScriptedExpert("reach"), "reach", "sparse", episodes=1, seed=0).episodes[0]
+    assert rec.success == first.success and rec.steps == first.length
+    assert rec.ret == pytest.approx(first.ret)
+    assert rec.distances.shape == (rec.steps + 1,) and rec.distances[-1] < 0.05 < rec.distances[0]
 
 
 def test_record_rollout_with_a_goal():
@@ -160,8 +166,16 @@ def test_record_rollout_with_a_goal():
 
     expert.predict = watching
     goal = np.array([0.05, -0.05, 0.15])
-    frames = record_rollout(expert, "reach", "sparse", seed=0, size=32, goal=goal)
-    assert len(frames) == len(seen) + 1 and len(seen) < 50
+    rec = record_rollout(expert, "reach", "sparse", seed=0, size=32, goal=goal)
+    assert len(rec.frames) == len(seen) + 1 and len(seen) < 50 and rec.success
     np.testing.assert_array_equal(np.array(seen), np.tile(goal.astype(np.float32), (len(seen), 1)))
-    with pytest.raises(GcdtError, match=r"goal must have 3 coordinates, got \[0.0, 0.0\]"):
+    np.testing.assert_allclose(rec.goal, goal, atol=1e-7)
+    with pytest.raises(GcdtError, match=r"a goal is 3 finite coordinates x, y, z, got \[0.0, 0"):
         record_rollout(expert, "reach", "sparse", goal=np.zeros(2))
+    # Reach draws its goals from a 30 cm cube around (0, 0, 0.15): the message gives it.
+    with pytest.raises(
+        GcdtError,
+        match=r"goal \(0.300, 0.000, 0.150\) lies outside Reach's goal range: "
+        r"x \[-0.150, 0.150\], y \[-0.150, 0.150\], z \[0.000, 0.300\]",
+    ):
+        record_rollout(expert, "reach", "sparse", goal=np.array([0.3, 0.0, 0.15]))

@@ -14,10 +14,9 @@ import torch
 
 from gcdt.checkpoint import load_checkpoint
 from gcdt.cli import main
-from gcdt.data import collect
 from gcdt.errors import GcdtError
 from gcdt.evaluation import evaluate
-from gcdt.policies import ScriptedExpert, make_policy
+from gcdt.policies import make_policy
 from gcdt.policies.trained import TrainedPolicy
 from gcdt.training import TrainConfig, WindowSampler, train
 
@@ -203,24 +202,26 @@ def test_bad_checkpoints_and_configs(make_dataset, tmp_path):
     assert TrainConfig(epochs=3, batch_size=64).total_steps(130) == 9
 
 
-@pytest.fixture(scope="module")
-def reach_expert_data():
-    return collect(ScriptedExpert("reach"), "reach", 3000, seed=0, n_envs=1, progress=False)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("method", ["dt", "bc"])
-def test_trained_policy_reaches_goals(reach_expert_data, tmp_path, method):
-    """A few hundred steps on scripted Reach expert data reach >= 90 % on fresh seeds."""
-    # BC at the grid's equal-sample budget: a DT sample holds K = 5 states, a BC sample one
-    # (at 400 steps BC scores ~80 % on the experts' 2.7-step episodes).
-    steps = 400 if method == "dt" else 400 * 5
-    cfg = TrainConfig(method=method, steps=steps, context=5, **FAST)  # K=5: 4x cheaper steps
-    result = train(reach_expert_data, cfg, tmp_path, progress=False)
-    policy = TrainedPolicy(result.checkpoint, "reach")
+def _reaches_goals(checkpoint, method: str, steps: int) -> None:
+    policy = TrainedPolicy(checkpoint, "reach")
     outcome = evaluate(policy, "reach", "sparse", episodes=60, n_envs=1, seed=12345, progress=False)
     assert outcome.summary["success_rate"] >= 0.9, outcome.summary
     assert policy.config()["method"] == method and policy.config()["trained_steps"] == steps
+
+
+@pytest.mark.slow
+def test_trained_gcdt_reaches_goals(reach_gcdt):
+    """400 steps at K = 5 (4x cheaper steps) on scripted Reach expert data reach >= 90 % on
+    fresh seeds (the shared `reach_gcdt` checkpoint)."""
+    _reaches_goals(reach_gcdt.checkpoint, "dt", 400)
+
+
+@pytest.mark.slow
+def test_trained_bc_reaches_goals(reach_expert_data, tmp_path):
+    """BC at the grid's equal-sample budget: a DT sample holds K = 5 states, a BC sample one
+    (at 400 steps BC scores ~80 % on the experts' 2.7-step episodes)."""
+    cfg = TrainConfig(method="bc", steps=400 * 5, context=5, **FAST)
+    _reaches_goals(train(reach_expert_data, cfg, tmp_path, progress=False).checkpoint, "bc", 2000)
 
 
 def test_checkpoint_policy_matches_model_and_cli(reach_expert_data, tmp_path, capsys):

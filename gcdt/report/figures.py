@@ -250,17 +250,48 @@ def table1_architecture_figure(runs: pd.DataFrame) -> plt.Figure | None:
     return None
 
 
-def attention_figure(weights, layer: int = -1) -> plt.Figure:
-    """What the newest state token attends to: one row per head of `layer`, tokens R, s, a
-    per context step (`weights` from `TrainedPolicy.attention()`, `[layers, heads, 3K, 3K]`)."""
+def _attention_panel(ax: plt.Axes, weights, layer: int = -1) -> None:
+    """The newest state token's attention over the context, one row per head of `layer`."""
     w = weights[layer][:, -2]  # the newest state token's query row (the last token is a_t)
     heads, n = w.shape
-    fig, ax = plt.subplots(figsize=(max(6, n / 5), 1 + 0.6 * heads))
     ax.imshow(w, aspect="auto", cmap="viridis")
     ax.set_xticks(range(n), ["R", "s", "a"] * (n // 3), fontsize=6)
     ax.set_yticks(range(heads), [f"head {h}" for h in range(heads)])
     ax.set_xlabel("context tokens, oldest first (left padding gets no weight)")
     ax.set_title(f"Attention of the newest state token, layer {layer % len(weights)}")
+
+
+def attention_figure(weights, layer: int = -1) -> plt.Figure:
+    """What the newest state token attends to: one row per head of `layer`, tokens R, s, a
+    per context step (`weights` from `TrainedPolicy.attention()`, `[layers, heads, 3K, 3K]`)."""
+    heads, n = weights[layer][:, -2].shape
+    fig, ax = plt.subplots(figsize=(max(6, n / 5), 1 + 0.6 * heads))
+    _attention_panel(ax, weights, layer)
+    fig.tight_layout()
+    return fig
+
+
+def rollout_figure(recording, threshold: float, weights=None) -> plt.Figure:
+    """One recorded episode (`gcdt.evaluation.Recording`): its distance to the goal per step
+    against the success threshold and, for a DT (`weights`), the final step's attention."""
+    fig, axes = plt.subplots(
+        1,
+        2 if weights is not None else 1,
+        figsize=(9 if weights is not None else 4, 3),
+        gridspec_kw={"width_ratios": [1, 2.2]} if weights is not None else None,
+        squeeze=False,
+    )
+    ax = axes[0, 0]
+    ax.plot(range(len(recording.distances)), recording.distances, marker="o", ms=3)
+    ax.axhline(threshold, color="tab:green", ls="--", lw=1, label=f"success: < {threshold} m")
+    ax.set_xlabel("step")
+    ax.set_ylabel("distance to the goal (m)")
+    ax.set_ylim(bottom=0)
+    verdict = "success" if recording.success else "goal not reached"
+    ax.set_title(f"{verdict}, return {recording.ret:.2f}")
+    ax.legend(fontsize=8)
+    if weights is not None:
+        _attention_panel(axes[0, 1], weights)
     fig.tight_layout()
     return fig
 
@@ -273,6 +304,7 @@ __all__ = [
     "expert_ratio_figure",
     "figures_dir",
     "learning_curves_figure",
+    "rollout_figure",
     "save",
     "table1_architecture_figure",
     "tqc_learning_curves_figure",

@@ -15,6 +15,7 @@ from gcdt.errors import GcdtError
 from gcdt.experiments import RunStore, build_grid
 from gcdt.experiments.grid import RUN_SCHEMA
 from gcdt.experiments.profiles import SMOKE, Scope
+from gcdt.provenance import utc_now
 from gcdt.report import figures, tables
 
 ALL = Scope(tasks=("reach", "push"), rewards=("sparse",))
@@ -135,18 +136,28 @@ def test_directions_set_each_claim_of_the_paper_beside_ours(runs):
 
 def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path))
-    _write_runs(tmp_path / "results" / PROFILE.name / "runs")
+    store = _write_runs(tmp_path / "results" / PROFILE.name / "runs")
     monkeypatch.setitem(report.PROFILES, PROFILE.name, PROFILE)
     assert "No wall time recorded" in report.readme_block(PROFILE)
+    # Two runs made by an earlier, interrupted `make reproduce`; the others by this one.
+    grid = build_grid(PROFILE)
+    for i, entry in enumerate(grid):
+        started = "2026-01-01T00:00:00+00:00" if i < 2 else utc_now()
+        execution = {"started": started, "seconds": {"total_seconds": 3600.0 if i < 2 else 60}}
+        result = store.read(entry.spec.key()).result
+        _write_result(store, entry.spec, result["metrics"], execution=execution)
     with pytest.raises(GcdtError, match="wall time must be >= 0"):
         report.record_reproduction(PROFILE, -1, "local")
     path = report.record_reproduction(PROFILE, 5430.04, "local")
     record = json.loads(path.read_text())
     assert record["command"] == "make reproduce PROFILE=report-test BACKEND=local"
-    assert record["wall_seconds"] == 5430.0 and record["runs"] == len(build_grid(PROFILE))
+    assert record["wall_seconds"] == 5430.0 and record["runs"] == len(grid)
+    assert record["earlier_runs"] == 2 and record["earlier_run_seconds"] == 7200.0
+    assert record["run_seconds"] == 7200.0 + 60 * (len(grid) - 2)
     report.write_report(PROFILE)
     block = report.readme_block(PROFILE)
     assert "**90 min**" in block and "| GC-DT vs BC, Push sparse |" in block
+    assert "It resumed an interrupted reproduction: 2 runs (2.0 h of their own time)" in block
     assert "![Fig. 3: success rate vs dataset size (RQ4)](figures/report-test/" in block
     assert "**Goal-conditioning ablation**" in block and "deviates from the paper" in block
 

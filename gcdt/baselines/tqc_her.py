@@ -293,6 +293,8 @@ TQC_PACKAGES = {
     "sb3": ("stable-baselines3", "sb3-contrib"),
     "sbx": ("stable-baselines3", "sbx-rl", "jax"),
 }
+#: Every backend's, in order: what a grid run records whatever its method.
+ALL_TQC_PACKAGES = tuple(dict.fromkeys(p for pkgs in TQC_PACKAGES.values() for p in pkgs))
 
 
 def _check_loop(cfg: TQCConfig, device: str) -> None:

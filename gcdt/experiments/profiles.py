@@ -332,7 +332,8 @@ def deviations(profile: Profile) -> list[str]:
             + ", ".join(f"{k} {v}" for k, v in changes.items())
             + ") instead of rl-baselines3-zoo's her-defaults"
         )
-    loop = load_tqc_config(p.tqc_config, "push").with_budget(**p.tqc_budget)
+    # The loop (backend, envs) is one for every task; a config is read for one task, any.
+    loop = load_tqc_config(p.tqc_config, PAPER_TASKS[0]).with_budget(**p.tqc_budget)
     if (loop.backend, loop.n_envs) != ("sb3", 1):
         out.append(
             f"TQC+HER trained with the {loop.backend} backend ({BACKENDS[loop.backend]}) on "

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from gcdt.baselines.tqc_her import RUN_JSON
+from gcdt.baselines.tqc_her import ALL_TQC_PACKAGES, RUN_JSON
 from gcdt.experiments import artifacts
 from gcdt.experiments.grid import RUN_SCHEMA, RunSpec
 from gcdt.experiments.store import RunStore
@@ -68,9 +68,7 @@ def execute_run(
         "seconds": timings,
         "torch_threads": torch.get_num_threads(),
         "git_commit": git_commit(),
-        "versions": package_versions(
-            (*TRACKED_PACKAGES, "stable-baselines3", "sb3-contrib", "sbx-rl", "jax")
-        ),
+        "versions": package_versions((*TRACKED_PACKAGES, *ALL_TQC_PACKAGES)),
     }
     RunStore(store_root).write(key, result)
     return result["status"]

@@ -187,18 +187,34 @@ def write_report(profile: Profile) -> list[Path]:
 
 
 def record_reproduction(profile: Profile, wall_seconds: float, backend: str) -> Path:
-    """Write results/<profile>/reproduce.json: how long `make reproduce` took, and where."""
+    """Write results/<profile>/reproduce.json: how long `make reproduce` took, and where.
+
+    A reproduction resumed after an interruption finds some runs done: the record counts
+    them and their own run time, so that the wall time is never read as the whole work's.
+    """
+    import datetime as dt
+
     from gcdt.provenance import git_commit, machine_info, utc_now
 
     if not wall_seconds >= 0:
         raise GcdtError(f"wall time must be >= 0 seconds, got {wall_seconds}")
     runs = tables.load_runs(profile)
+    started = dt.datetime.now(dt.UTC) - dt.timedelta(seconds=float(wall_seconds))
+    seconds = [float(e.get("seconds", {}).get("total_seconds", 0.0)) for e in runs["execution"]]
+    earlier = [
+        s
+        for e, s in zip(runs["execution"], seconds, strict=True)
+        if "started" in e and dt.datetime.fromisoformat(e["started"]) < started
+    ]
     record = {
         "command": f"make reproduce PROFILE={profile.name} BACKEND={backend}",
         "wall_seconds": round(float(wall_seconds), 1),
         "finished": utc_now(),
         "git_commit": git_commit(),
         "runs": len(runs),
+        "run_seconds": round(sum(seconds), 1),  # the runs' own times added up: the work
+        "earlier_runs": len(earlier),  # done before this invocation started (resumed)
+        "earlier_run_seconds": round(sum(earlier), 1),
         "machine": machine_info(),
     }
     path = results_dir(profile.name) / "reproduce.json"
@@ -213,12 +229,21 @@ def _wall_time_text(profile: Profile) -> str:
     record = json.loads(path.read_text())
     minutes = record["wall_seconds"] / 60
     machine = record["machine"]
-    return (
+    text = (
         f"Wall time of `{record['command']}` (notebooks, runs and report; environment "
         f"install excluded): **{minutes:.0f} min** on {machine['cores']} cores "
         f"({machine['cpu']}), {record['runs']} runs, finished {record['finished']} at "
         f"commit {str(record['git_commit'])[:12]}."
     )
+    if "run_seconds" in record:
+        text += f" The runs' own times add up to {record['run_seconds'] / 3600:.1f} h of work."
+    if record.get("earlier_runs"):
+        text += (
+            f" It resumed an interrupted reproduction: {record['earlier_runs']} runs "
+            f"({record['earlier_run_seconds'] / 3600:.1f} h of their own time) were done "
+            "before it started and are not in its wall time."
+        )
+    return text
 
 
 def readme_block(profile: Profile) -> str:

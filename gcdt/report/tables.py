@@ -74,6 +74,7 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
                 "std_return": _pooled_std(result.get("evaluations", [])),
                 "evaluations": result.get("evaluations", []),
                 "training": result.get("training", {}),
+                "execution": result.get("execution", {}),  # when, where, how long
             }
         )
     if not rows:

@@ -174,6 +174,16 @@ def _build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _add_policy_options(parser: argparse.ArgumentParser, *, reward: bool) -> None:
+    """What every command that runs a policy asks for: the policy, its task (and reward), and
+    the scripted expert's action noise."""
+    parser.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
+    parser.add_argument("--task", required=True, choices=list(TASKS))
+    if reward:
+        parser.add_argument("--reward", required=True, choices=list(REWARDS))
+    parser.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
+
+
 def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     ev = sub.add_parser(
         "evaluate",
@@ -182,16 +192,13 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
         f"(default {DEFAULT_TIMESTEPS:,}) counting every finished episode, or a fixed number "
         "of episodes.",
     )
-    ev.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
-    ev.add_argument("--task", required=True, choices=list(TASKS))
-    ev.add_argument("--reward", required=True, choices=list(REWARDS))
+    _add_policy_options(ev, reward=True)
     _add_config_options(
         ev,
         EvaluationConfig,
         exclusive=("timesteps", "episodes"),
         settings={"n_envs": {"flag": "--envs", "metavar": "N"}},
     )
-    ev.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
     ev.add_argument(
         "--target-return",
         type=float,
@@ -262,9 +269,7 @@ def _rollout_parser(sub: argparse._SubParsersAction) -> None:
         description="Render evaluation episode 0 of --seed headless and save it as a GIF; "
         "--goal replaces its desired goal (the explorer of notebook 07, from the shell).",
     )
-    ro.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
-    ro.add_argument("--task", required=True, choices=list(TASKS))
-    ro.add_argument("--reward", required=True, choices=list(REWARDS))
+    _add_policy_options(ro, reward=True)
     ro.add_argument(
         "--goal",
         type=_goal,
@@ -279,7 +284,6 @@ def _rollout_parser(sub: argparse._SubParsersAction) -> None:
     )
     ro.add_argument("--seed", type=_int_at_least(0), default=0, help="evaluation seed")
     ro.add_argument("--size", type=_int_at_least(16), default=360, help="frame size, pixels")
-    ro.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
     ro.add_argument("--out", type=Path, required=True, metavar="GIF", help="the GIF to write")
     ro.set_defaults(run=_rollout)
 
@@ -370,13 +374,11 @@ def _collect_parser(sub: argparse._SubParsersAction) -> None:
         description="Run a policy on parallel envs and save its first whole episodes that "
         "add up to at least N transitions (both reward types are stored).",
     )
-    co.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
-    co.add_argument("--task", required=True, choices=list(TASKS))
+    _add_policy_options(co, reward=False)
     co.add_argument("--transitions", required=True, type=_positive_int, metavar="N")
     co.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
     co.add_argument("--seed", type=_int_at_least(0), default=0)
     co.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
-    co.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
     co.add_argument(
         "--labels",
         choices=LABELS,

@@ -177,7 +177,7 @@ class Explorer:
         self._task_changed()
 
     def _task_changed(self) -> None:
-        """Another task: its checkpoints and its goal range (the middle of it), then a rollout."""
+        """Another task: its checkpoints and its goal range (sliders at `START`), then a rollout."""
         task = self.task.value
         low, high = goal_range(task)
         self._quiet = True

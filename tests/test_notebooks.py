@@ -20,6 +20,8 @@ def test_committed_without_outputs_and_with_parameters(path):
     code = [c for c in cells if c["cell_type"] == "code"]
     dirty = [i for i, c in enumerate(code) if c["outputs"] or c["execution_count"] is not None]
     assert not dirty, f"{path.name}: code cells {dirty} hold outputs; clear them before committing"
+    missing = [i for i, c in enumerate(cells) if not c.get("id")]
+    assert not missing, f"{path.name}: cells {missing} have no id (nbformat 4.5 requires one)"
     params = [c for c in code if "parameters" in c.get("metadata", {}).get("tags", [])]
     assert len(params) == 1 and "profile = " in "".join(params[0]["source"])
 

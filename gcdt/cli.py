@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import datetime as dt
 import json
 import sys
 import typing
@@ -98,6 +99,13 @@ def _ratio(text: str) -> float:
     if not 0.0 <= value <= 1.0:
         raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text}")
     return value
+
+
+def _gif_path(text: str) -> Path:
+    """An argparse type: an output animation path, which must end in .gif."""
+    if not text.endswith(".gif"):
+        raise argparse.ArgumentTypeError(f"animations are GIF files ending in .gif, got {text!r}")
+    return Path(text)
 
 
 def _npz_path(text: str) -> Path:
@@ -284,7 +292,7 @@ def _rollout_parser(sub: argparse._SubParsersAction) -> None:
     )
     ro.add_argument("--seed", type=_int_at_least(0), default=0, help="evaluation seed")
     ro.add_argument("--size", type=_int_at_least(16), default=360, help="frame size, pixels")
-    ro.add_argument("--out", type=Path, required=True, metavar="GIF", help="the GIF to write")
+    ro.add_argument("--out", type=_gif_path, required=True, metavar="PATH.gif")
     ro.set_defaults(run=_rollout)
 
 
@@ -743,12 +751,15 @@ def _report_cmd(args: argparse.Namespace) -> int:
     from gcdt.paths import REPO_ROOT
     from gcdt.report import record_reproduction, update_readme, write_report
 
+    measured_at = dt.datetime.now(dt.UTC)  # when make measured --wall-seconds, near enough
     profile = get_profile(args.profile)
     if args.wall_seconds is not None and not args.wall_seconds >= 0:  # before writing anything
         raise GcdtError(f"--wall-seconds must be >= 0, got {args.wall_seconds}")
     written = write_report(profile)
     if args.wall_seconds is not None:
-        written.append(record_reproduction(profile, args.wall_seconds, args.backend))
+        written.append(
+            record_reproduction(profile, args.wall_seconds, args.backend, measured_at=measured_at)
+        )
     for path in written:
         print(path.relative_to(REPO_ROOT) if path.is_relative_to(REPO_ROOT) else path)
     if args.readme:

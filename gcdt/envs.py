@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 
 from gcdt.errors import GcdtError
-from gcdt.regions import GoalRegion, goal_box, restrict_goals
+from gcdt.regions import GoalRegion, check_single_goal, goal_box, restrict_goals
 
 RewardType = Literal["sparse", "dense"]
 REWARDS: tuple[str, ...] = ("sparse", "dense")
@@ -154,11 +154,18 @@ def make_env(
     return env
 
 
-@functools.cache
 def goal_range(task: str) -> tuple[np.ndarray, np.ndarray]:
-    """The world-coordinate box `task` draws its desired goals from (low, high)."""
+    """The world-coordinate box `task` draws its desired goal from (low, high); a task with
+    several goal positions (Stack) is refused."""
+    low, high = _goal_range(get_task(task).name)
+    return low.copy(), high.copy()  # the cached arrays stay as they are
+
+
+@functools.cache
+def _goal_range(task: str) -> tuple[np.ndarray, np.ndarray]:
     env = make_env(task, "sparse")
     try:
+        check_single_goal(env.unwrapped.task)
         return goal_box(env.unwrapped.task)
     finally:
         env.close()

@@ -262,8 +262,8 @@ def record_rollout(
 
     The episode is the run's episode 0 for `seed`, the same one `evaluate(seed=seed)` starts
     with; `goal` replaces its desired goal (and moves the target marker) and must lie in the
-    task's goal range. Afterwards a DT policy still holds the episode's last context (its
-    `attention()` shows the final step).
+    task's goal range. Returns the episode's `Recording`; afterwards a DT policy still holds
+    the episode's last context (its `attention()` shows the final step).
     """
     frames: list[np.ndarray] = []
     distances: list[float] = []
@@ -293,7 +293,7 @@ def record_rollout(
         frames=frames,
         goal=desired,
         distances=np.asarray(distances),
-        rewards=np.asarray(rewards, dtype=np.float32),
+        rewards=np.asarray(rewards, dtype=np.float64),  # summed as `evaluate` sums them
         success=success,
     )
     if path is not None:

@@ -133,6 +133,7 @@ class Explorer:
             description="checkpoint",
             placeholder="a checkpoint above, or a checkpoint.pt path",
             ensure_option=False,
+            continuous_update=False,  # a typed path rolls out once, on Enter or leaving the box
             style=wide,
             layout=w.Layout(width="560px"),
         )
@@ -220,6 +221,9 @@ class Explorer:
             )
         except GcdtError as err:
             self._say(f"✗ {escape(str(err))}", error=True)
+            return None
+        except Exception as err:  # shown, not lost in the kernel's log; the last rollout stays
+            self._say(f"✗ {type(err).__name__}: {escape(str(err))}", error=True)
             return None
         self.rollouts += 1
         self.last = result

@@ -51,17 +51,20 @@ def test_the_widgets_say_what_is_wrong_and_keep_the_last_rollout(checkpoints):
         {"reach": {"tiny": checkpoints["reach"]}, "push": {"tiny push": checkpoints["push"]}},
         size=48,
     )
-    shown = explorer.figure.value
+    first, shown = explorer.last, explorer.figure.value
     explorer.target.value = "nan"
     assert "target return must be a finite number" in explorer.status.value
     assert "gcdt-error" in explorer.status.value and explorer.rollouts == 1
-    explorer.target.value = "0"
+    assert explorer.last is first and explorer.figure.value is shown  # the last one stays
+    explorer.target.value = "-1"
+    second, shown = explorer.last, explorer.figure.value
+    assert explorer.rollouts == 2 and second is not first
     explorer.checkpoint.value = str(checkpoints["push"])  # a path typed into the box
     assert (
         f"checkpoint {checkpoints['push']} is for task &#x27;push&#x27;, not &#x27;reach&#x27;"
         in explorer.status.value
     )
-    assert explorer.rollouts == 2 and explorer.figure.value == shown  # nothing new drawn
+    assert explorer.last is second and explorer.figure.value is shown  # nothing new drawn
     explorer.task.value = "push"  # Push's goals lie on the table: z is fixed
     assert explorer.sliders[2].disabled and explorer.sliders[2].value == pytest.approx(0.02)
     assert explorer.rollouts == 3 and explorer.checkpoint.value == "tiny push"
@@ -78,6 +81,8 @@ def test_bad_choices_are_refused_in_one_line(checkpoints):
         parse_target("minus two")
     with pytest.raises(GcdtError, match="at least one checkpoint"):
         Explorer({"reach": {}})
+    with pytest.raises(GcdtError, match="Stack's desired goal is 2 positions"):
+        Explorer({"stack": {"any": checkpoints["push"]}})
     assert parse_target(" -6.5 ") == -6.5
 
 
@@ -108,4 +113,10 @@ def test_the_rollout_command_refuses_bad_choices(checkpoints, tmp_path, assert_u
         "target return must be a finite number",
     )
     assert_usage_error([*base, "--policy", push], "is for task 'push', not 'reach'")
+    png = ["rollout", "--task", "reach", "--reward", "sparse", "--policy", reach]
+    assert_usage_error([*png, "--out", str(tmp_path / "a.png")], "GIF files ending in .gif")
+    stack = ["rollout", "--task", "stack", "--reward", "sparse", "--policy", "random"]
+    assert_usage_error(
+        [*stack, "--goal", "0,0,0.1", "--out", str(out)], "Stack's desired goal is 2 positions"
+    )
     assert not out.exists() and not list(tmp_path.iterdir())

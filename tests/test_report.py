@@ -142,8 +142,8 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     # Two runs made by an earlier, interrupted `make reproduce`; the others by this one.
     grid = build_grid(PROFILE)
     for i, entry in enumerate(grid):
-        started = "2026-01-01T00:00:00+00:00" if i < 2 else utc_now()
-        execution = {"started": started, "seconds": {"total_seconds": 3600.0 if i < 2 else 60}}
+        finished = "2026-01-01T00:00:00+00:00" if i < 2 else utc_now()
+        execution = {"finished": finished, "seconds": {"total_seconds": 3600.0 if i < 2 else 60}}
         result = store.read(entry.spec.key()).result
         _write_result(store, entry.spec, result["metrics"], execution=execution)
     with pytest.raises(GcdtError, match="wall time must be >= 0"):
@@ -157,7 +157,7 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     report.write_report(PROFILE)
     block = report.readme_block(PROFILE)
     assert "**90 min**" in block and "| GC-DT vs BC, Push sparse |" in block
-    assert "It resumed an interrupted reproduction: 2 runs (2.0 h of their own time)" in block
+    assert "2 runs (2.0 h of their own time) were already done when it started" in block
     assert "![Fig. 3: success rate vs dataset size (RQ4)](figures/report-test/" in block
     assert "**Goal-conditioning ablation**" in block and "deviates from the paper" in block
 

@@ -12,6 +12,7 @@ helpers (`show`, `run_grid`) are here too.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 from pathlib import Path
 
@@ -186,25 +187,27 @@ def write_report(profile: Profile) -> list[Path]:
     return [*written, report]
 
 
-def record_reproduction(profile: Profile, wall_seconds: float, backend: str) -> Path:
+def record_reproduction(
+    profile: Profile, wall_seconds: float, backend: str, *, measured_at: dt.datetime | None = None
+) -> Path:
     """Write results/<profile>/reproduce.json: how long `make reproduce` took, and where.
 
-    A reproduction resumed after an interruption finds some runs done: the record counts
+    A reproduction that resumes an interrupted one finds some runs done: the record counts
     them and their own run time, so that the wall time is never read as the whole work's.
+    `measured_at` is when `wall_seconds` was taken (default now): the reproduction started
+    `wall_seconds` before it, and a run that finished before that start was already done.
     """
-    import datetime as dt
-
     from gcdt.provenance import git_commit, machine_info, utc_now
 
     if not wall_seconds >= 0:
         raise GcdtError(f"wall time must be >= 0 seconds, got {wall_seconds}")
     runs = tables.load_runs(profile)
-    started = dt.datetime.now(dt.UTC) - dt.timedelta(seconds=float(wall_seconds))
+    started = (measured_at or dt.datetime.now(dt.UTC)) - dt.timedelta(seconds=wall_seconds)
     seconds = [float(e.get("seconds", {}).get("total_seconds", 0.0)) for e in runs["execution"]]
     earlier = [
         s
         for e, s in zip(runs["execution"], seconds, strict=True)
-        if "started" in e and dt.datetime.fromisoformat(e["started"]) < started
+        if "finished" in e and dt.datetime.fromisoformat(e["finished"]) < started
     ]
     record = {
         "command": f"make reproduce PROFILE={profile.name} BACKEND={backend}",
@@ -213,7 +216,7 @@ def record_reproduction(profile: Profile, wall_seconds: float, backend: str) -> 
         "git_commit": git_commit(),
         "runs": len(runs),
         "run_seconds": round(sum(seconds), 1),  # the runs' own times added up: the work
-        "earlier_runs": len(earlier),  # done before this invocation started (resumed)
+        "earlier_runs": len(earlier),  # already done when this reproduction started
         "earlier_run_seconds": round(sum(earlier), 1),
         "machine": machine_info(),
     }
@@ -239,9 +242,9 @@ def _wall_time_text(profile: Profile) -> str:
         text += f" The runs' own times add up to {record['run_seconds'] / 3600:.1f} h of work."
     if record.get("earlier_runs"):
         text += (
-            f" It resumed an interrupted reproduction: {record['earlier_runs']} runs "
-            f"({record['earlier_run_seconds'] / 3600:.1f} h of their own time) were done "
-            "before it started and are not in its wall time."
+            f" {record['earlier_runs']} runs ({record['earlier_run_seconds'] / 3600:.1f} h of "
+            "their own time) were already done when it started (an interrupted reproduction, "
+            "resumed) and are not in its wall time."
         )
     return text
 

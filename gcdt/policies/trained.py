@@ -42,7 +42,10 @@ class TrainedPolicy(Policy):
         ckpt = checkpoint if isinstance(checkpoint, dict) else load_checkpoint(checkpoint)
         self.path = None if isinstance(checkpoint, dict) else str(checkpoint)
         if task is not None and task != ckpt["task"]:
-            raise GcdtError(f"checkpoint {self.path} is for task {ckpt['task']!r}, not {task!r}")
+            raise GcdtError(
+                f"checkpoint {self.path} is for task {ckpt['task']!r}, not {task!r}: choose a "
+                f"{task} checkpoint, or task {ckpt['task']}"
+            )
         super().__init__(ckpt["task"])
         cfg = ckpt["train_config"]
         self.method = ckpt["method"]

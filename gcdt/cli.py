@@ -318,9 +318,8 @@ def _rollout(args: argparse.Namespace) -> int:
         policy, args.task, args.reward, args.seed, path=args.out, size=args.size, goal=args.goal
     )
     goal = ", ".join(f"{v:.3f}" for v in rec.goal)
-    verdict = "success" if rec.success else "goal not reached"
     print(
-        f"{policy.name} on {args.task}/{args.reward} towards ({goal}): {verdict}, "
+        f"{policy.name} on {args.task}/{args.reward} towards ({goal}): {rec.verdict}, "
         f"return {rec.ret:.2f} over {rec.steps} steps: {args.out}"
     )
     return 0

@@ -227,6 +227,11 @@ class Recording:
         return len(self.rewards)
 
     @property
+    def verdict(self) -> str:
+        """How the episode ended, in words: what the explorer, the CLI and the figure say."""
+        return "success" if self.success else "goal not reached"
+
+    @property
     def ret(self) -> float:  # named as in `EpisodeRecord`
         return float(self.rewards.sum())
 

@@ -44,9 +44,8 @@ class Exploration:
     def summary(self) -> str:
         rec = self.recording
         goal = ", ".join(f"{v:.3f}" for v in rec.goal)
-        verdict = "success" if rec.success else "goal not reached"
         return (
-            f"{verdict}, return {rec.ret:.2f} over {rec.steps} step{'s' * (rec.steps != 1)} "
+            f"{rec.verdict}, return {rec.ret:.2f} over {rec.steps} step{'s' * (rec.steps != 1)} "
             f"(goal ({goal}), target return {self.target_return:g})"
         )
 

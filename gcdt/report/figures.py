@@ -287,8 +287,7 @@ def rollout_figure(recording, threshold: float, weights=None) -> plt.Figure:
     ax.set_xlabel("step")
     ax.set_ylabel("distance to the goal (m)")
     ax.set_ylim(bottom=0)
-    verdict = "success" if recording.success else "goal not reached"
-    ax.set_title(f"{verdict}, return {recording.ret:.2f}")
+    ax.set_title(f"{recording.verdict}, return {recording.ret:.2f}")
     ax.legend(fontsize=8)
     if weights is not None:
         _attention_panel(axes[0, 1], weights)

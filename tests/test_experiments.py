@@ -388,6 +388,33 @@ def test_dry_run_lists_runs_with_state_and_cost(capsys):
     )
 
 
+def test_costs_learn_every_rate_from_finished_runs(tmp_path, monkeypatch):
+    """A reproduction's own finished runs (TQC+HER's included) set the dry run's rates."""
+    from gcdt.experiments import costs as costs_module
+    from gcdt.experiments.costs import CostModel
+
+    # Away from the published runs and benchmarks, whose rates would join the medians.
+    monkeypatch.setattr(costs_module, "REPO_ROOT", tmp_path / "repository")
+
+    runs = tmp_path / "results" / "quick" / "runs"
+    runs.mkdir(parents=True)
+    timed = {"tqc": ({"env_steps": 20_000}, 600.0), "bc": ({"steps": 1_000}, 5.0)}
+    for method, (training, train_seconds) in timed.items():
+        spec = {"method": method, "tqc": {"config": "cpu"}, "eval_timesteps": 0, "eval_seeds": []}
+        result = {
+            "status": "done",
+            "spec": spec,
+            "training": training,
+            "execution": {"seconds": {"train_seconds": train_seconds}},
+        }
+        (runs / f"{method}.json").write_text(json.dumps(result))
+    monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path))
+    costs = CostModel.measured()
+    assert costs.rates["tqc_step:cpu"] == pytest.approx(600 / 20_000)
+    assert costs.rates["bc_step"] == pytest.approx(5 / 1_000)
+    assert costs.source["tqc_step:cpu"].endswith("finished runs")
+
+
 #: The paper profile's structure at toy sizes: TQC+HER experts, expert data collected by a
 #: TQC agent, the authors' epoch budget (GC-DT: 120 epochs over episodes; BC: over
 #: transitions), TQC+HER for as many online steps as the data has transitions, evaluation.

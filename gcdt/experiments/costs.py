@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from statistics import median
 
 from gcdt.experiments.grid import OFFLINE_METHODS, RunSpec
-from gcdt.paths import REPO_ROOT
+from gcdt.paths import REPO_ROOT, outputs_root
 
 #: Reference-machine rates (seconds per unit), used when neither results/bench/ nor finished
 #: runs say better: `benchmarks/run_costs.py` (two runs in parallel, one torch thread each,
@@ -63,7 +63,9 @@ class CostModel:
             ):
                 model._set(name, 1 / runs[key] if invert else runs[key], "run_costs.json")
         samples: dict[str, list[float]] = {}
-        for path in (REPO_ROOT / "results").glob("*/runs/*.json"):
+        # The published runs and, in a reproduction, its own (the same file is read once).
+        roots = dict.fromkeys(root.resolve() for root in (REPO_ROOT, outputs_root()))
+        for path in (p for root in roots for p in (root / "results").glob("*/runs/*.json")):
             try:
                 result = json.loads(path.read_text())
                 if result.get("status") == "done":
@@ -106,7 +108,13 @@ def offline_steps(spec: RunSpec) -> int:
 
 def _samples(result: dict, samples: dict[str, list[float]]) -> None:
     spec, seconds = result["spec"], result["execution"]["seconds"]
-    steps = result.get("training", {}).get("steps")
+    training = result.get("training", {})
+    if spec["method"] == "tqc":
+        # Env steps with their gradient steps and learning-curve evaluations: what a run costs.
+        if training.get("env_steps", 0) >= 1000 and seconds.get("train_seconds", 0) > 1:
+            name = f"tqc_step:{spec['tqc']['config']}"
+            samples.setdefault(name, []).append(seconds["train_seconds"] / training["env_steps"])
+    steps = training.get("steps")
     # Short runs measure start-up more than steps; a reused checkpoint measures nothing.
     if spec["method"] != "tqc" and steps and steps >= 100 and seconds.get("train_seconds", 0) > 1:
         name = "bc_step" if spec["method"] == "bc" else "dt_step"

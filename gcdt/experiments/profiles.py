@@ -1,8 +1,8 @@
 """Scale profiles: every number that sets the size of the experiment grid, in one place.
 
 `paper` is the paper's protocol; `quick` a real, reduced reproduction of Table 1 for a 2-core
-CPU (1.3 h by the dry run's estimate); `standard` adds Fig. 3 and Fig. 4 on every task and the
-return-target and goal-generalisation studies (a few hours); `smoke` runs every stage in
+CPU (4.4 h there on a fresh clone); `standard` adds Fig. 3 and Fig. 4 on every task and the
+return-target and goal-generalisation studies (about 12 h there); `smoke` runs every stage in
 minutes and its numbers mean nothing.
 `deviations(profile)` is the one text that lists how a profile differs from the paper; the
 README and the reports print it rather than restating it.
@@ -181,8 +181,7 @@ PAPER = Profile(
 QUICK = dataclasses.replace(
     PAPER,
     name="quick",
-    description="a real, reduced reproduction of Table 1 (3 seeds) on a 2-core CPU, about "
-    "1.3 h by the dry run's estimate",
+    description="a real, reduced reproduction of Table 1 (3 seeds), about 4.5 h on a 2-core CPU",
     expert="scripted",
     # Noisy demonstrations (as in DART, Laskey et al. 2017), the executed action as label.
     # Chosen on held-out seeds before the grid ran (results/quick_checks/README.md): GC-DT on
@@ -205,10 +204,10 @@ QUICK = dataclasses.replace(
     # DT's forward passes (326 against 229 env steps/s on one thread).
     eval_envs=4,
     # TQC+HER in every Table 1 cell, for as many online steps as the expert data has
-    # transitions (20,000: about 2 minutes each with the fast loop,
-    # results/bench/tqc_her_throughput.json).
+    # transitions (20,000: 8-13 minutes each on one core of a 2-core CPU beside another run,
+    # its learning-curve evaluations included; results/quick/runs/).
     tqc_config="cpu",
-    # Table 1 whole, at 3 seeds, fills the 90 minutes; Fig. 3 and Fig. 4 are `standard`'s.
+    # Table 1 whole, at 3 seeds, is already 8 h of work; Fig. 3 and Fig. 4 are `standard`'s.
     table1=Scope(),
     rq4=Scope(tasks=()),
     rq5=Scope(tasks=()),
@@ -220,7 +219,7 @@ STANDARD = dataclasses.replace(
     name="standard",
     description="quick's Table 1 plus Fig. 3 and Fig. 4 (RQ4, RQ5) on every task with sparse "
     "rewards and two studies beyond the paper (the return target, goals outside the training "
-    "region), 3 seeds; a few hours on a 2-core CPU",
+    "region), 3 seeds; about 12 h on a 2-core CPU",
     rq4=Scope(rewards=("sparse",)),
     rq5=Scope(rewards=("sparse",)),
     targets=Scope(),

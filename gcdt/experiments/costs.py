@@ -114,9 +114,8 @@ def _samples(result: dict, samples: dict[str, list[float]]) -> None:
         if training.get("env_steps", 0) >= 1000 and seconds.get("train_seconds", 0) > 1:
             name = f"tqc_step:{spec['tqc']['config']}"
             samples.setdefault(name, []).append(seconds["train_seconds"] / training["env_steps"])
-    steps = training.get("steps")
-    # Short runs measure start-up more than steps; a reused checkpoint measures nothing.
-    if spec["method"] != "tqc" and steps and steps >= 100 and seconds.get("train_seconds", 0) > 1:
+    elif (steps := training.get("steps")) and steps >= 100 and seconds.get("train_seconds", 0) > 1:
+        # (Short runs measure start-up more than steps; a reused checkpoint measures nothing.)
         name = "bc_step" if spec["method"] == "bc" else "dt_step"
         samples.setdefault(name, []).append(seconds["train_seconds"] / steps)
     evaluated = spec["eval_timesteps"] * len(spec["eval_seeds"])

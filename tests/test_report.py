@@ -159,6 +159,7 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     assert "**90 min**" in block and "| GC-DT vs BC, Push sparse |" in block
     assert "2 runs (2.0 h of their own time) were already done when it started" in block
     assert "![Fig. 3: success rate vs dataset size (RQ4)](figures/report-test/" in block
+    assert "![Goal generalisation (ours): success inside vs outside" in block
     assert "**Goal-conditioning ablation**" in block and "deviates from the paper" in block
 
 

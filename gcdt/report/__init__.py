@@ -252,7 +252,8 @@ def _wall_time_text(profile: Profile) -> str:
 def readme_block(profile: Profile) -> str:
     """The README's results section, all generated from results/<profile>/: Table 1 beside
     the paper's values, where ours and the paper's point in different directions, the
-    ablation, Fig. 3 and 4, the wall time and the profile's deviations."""
+    ablation, Fig. 3 and 4, the two studies' figures, the wall time and the profile's
+    deviations."""
     runs = tables.load_runs(profile)
     name = profile.name
     parts = [
@@ -275,6 +276,11 @@ def readme_block(profile: Profile) -> str:
     for fig, caption in (
         ("fig3_dataset_size", "Fig. 3: success rate vs dataset size (RQ4)"),
         ("fig4_expert_ratio", "Fig. 4: success rate vs expert share (RQ5)"),
+        ("return_target", "Return-target study (ours): success vs the target return"),
+        (
+            "goal_generalisation",
+            "Goal generalisation (ours): success inside vs outside the training goals' region",
+        ),
     ):
         path = figures.figures_dir(name) / f"{fig}.png"
         if path.exists():

@@ -181,7 +181,7 @@ PAPER = Profile(
 QUICK = dataclasses.replace(
     PAPER,
     name="quick",
-    description="a real, reduced reproduction of Table 1 (3 seeds), about 4.5 h on a 2-core CPU",
+    description="a real, reduced reproduction of Table 1 (3 seeds), 4.4 h on a 2-core CPU",
     expert="scripted",
     # Noisy demonstrations (as in DART, Laskey et al. 2017), the executed action as label.
     # Chosen on held-out seeds before the grid ran (results/quick_checks/README.md): GC-DT on

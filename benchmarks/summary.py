@@ -364,6 +364,29 @@ def tqc_section() -> str | None:
             f"the paper's step budget of that task at each speed; {speed['target']}):\n\n"
             + _table(["config", "networks", "batch", "sb3, 1 env", "new", "speedup", "hours"], rows)
         )
+    profile = _load("tqc_her_profile")
+    if profile is not None and "loops" in profile:
+        loops = profile["loops"]
+        rows = [
+            [part.replace("_", " ")]
+            + [f"{cell['ms_per_learning_env_step'][part]:.2f}" for cell in loops.values()]
+            for part in next(iter(loops.values()))["ms_per_learning_env_step"]
+        ]
+        rows.append(
+            ["**total**"]
+            + [f"**{sum(c['ms_per_learning_env_step'].values()):.2f}**" for c in loops.values()]
+        )
+        parts.append(
+            f"Where the time goes: ms per env step of the learning phase, config "
+            f"`{profile['config']}` on {profile['task']}, both loops profiled in one run "
+            "(`benchmarks/tqc_her_profile.py`; cProfile slows the Python-heavy parts). The "
+            f"gradient step alone is {profile['gradient_step_speedup']:.2f}x faster in the new "
+            "loop; were everything else free, the new loop would be at most "
+            f"{profile['speedup_ceiling']:.2f}x today's:\n\n"
+            + _table(
+                ["part"] + [f"{c['backend']}, {c['n_envs']} env(s)" for c in loops.values()], rows
+            )
+        )
     if reach is not None:
         rows = [
             [

@@ -1,15 +1,23 @@
-"""Where TQC+HER's time goes per env step: today's SB3 loop, profiled.
+"""Where TQC+HER's time goes per env step, in both loops, and how fast the new one can get.
 
-    python benchmarks/tqc_her_profile.py [--task push] [--config cpu] [--learning-steps 1000]
+    python benchmarks/tqc_her_profile.py [--task push] [--config cpu] [--learning-steps 1600]
 
 Trains the config (gcdt/baselines/tqc_her.yaml) for its `learning_starts` random steps plus
-`--learning-steps` learning steps under cProfile, then splits the learning phase's time per
-env step into: the simulator step (the vector env's `step_wait`), HER's replay sampling less
-its reward recomputation, the reward recomputation (`compute_reward` through `env_method`),
-the gradient step (TQC's `train` less its sampling), the collection's action choice, adding to
-the replay buffer, and the rest of SB3's loop -> results/bench/tqc_her_profile.json. The
-profiler adds its own cost to Python-heavy parts, so the shares are indicative; the same run's
-unprofiled env steps/s is `benchmarks/tqc_her.py throughput`'s number.
+`--learning-steps` learning steps under cProfile, once in today's loop (sb3-contrib's TQC on
+one env) and once in the config's own (SBX's on 8 envs), and splits each learning phase's time
+per env step into: the simulator step (the vector env's `step_wait`), HER's replay sampling
+less its reward recomputation, the reward recomputation (`compute_reward` through
+`env_method`), the gradient step (TQC's `train` less its sampling), the collection's action
+choice, adding to the replay buffer, and the rest of SB3's loop ->
+results/bench/tqc_her_profile.json. The profiler adds its own cost to Python-heavy parts, so
+the shares are indicative; unprofiled env steps/s are `benchmarks/tqc_her.py throughput`'s.
+
+`gradient_step_speedup` compares the two gradient steps alone (the same networks and batch).
+`speedup_ceiling` is today's loop's time per env step over the new loop's gradient step: the
+speed-up the new loop would have if everything but its gradient steps took no time (an upper
+bound, more so as the profiler slows today's Python-heavier loop). Each update needs the
+previous one's weights and the next action needs both, so the gradient steps cannot overlap
+the env steps without changing the algorithm.
 """
 
 from __future__ import annotations
@@ -23,8 +31,9 @@ import time
 from pathlib import Path
 
 from common import write_report
+from tqc_her import SB3_LOOP
 
-from gcdt.baselines.tqc_her import load_tqc_config, train_tqc
+from gcdt.baselines.tqc_her import TQCConfig, load_tqc_config, train_tqc
 
 #: (part, the functions whose cumulative time it is, by (file suffix, function name)).
 PARTS = {
@@ -49,22 +58,32 @@ def _cumulative(stats: pstats.Stats, targets: list[tuple[str, str]]) -> float:
 
 
 def profile(task: str, config: str, learning_steps: int) -> dict:
-    cfg = load_tqc_config(config, task)
-    cfg = cfg.with_budget(steps=cfg.learning_starts + learning_steps)
-    out = Path(tempfile.mkdtemp(prefix="tqc_profile_"))
-    profiler = cProfile.Profile()
+    loops = {
+        loop: _profile_loop(task, config, learning_steps, changes)
+        for loop, changes in (("sb3", SB3_LOOP), ("new", {}))
+    }
+    ms = {loop: cell["ms_per_learning_env_step"] for loop, cell in loops.items()}
+    return {
+        "task": task,
+        "config": config,
+        "learning_steps": learning_steps,
+        "loops": loops,
+        "gradient_step_speedup": round(ms["sb3"]["gradient_step"] / ms["new"]["gradient_step"], 2),
+        "speedup_ceiling": round(sum(ms["sb3"].values()) / ms["new"]["gradient_step"], 2),
+    }
+
+
+def _profile_loop(task: str, config: str, learning_steps: int, changes: dict) -> dict:
+    """One loop's time per learning env step: a run of `learning_starts` + `learning_steps`
+    env steps less a run of `learning_starts` + 2 loop iterations, both profiled, so random
+    warm-up steps and JAX's compilation (per model, in the first iterations) cancel out."""
+    cfg = load_tqc_config(config, task).with_budget(**changes)
+    short = 2 * cfg.n_envs
     began = time.perf_counter()
-    try:
-        profiler.enable()
-        train_tqc(
-            task, "sparse", cfg, out / "run", eval_every=cfg.steps, eval_episodes=1, progress=False
-        )
-        profiler.disable()
-    finally:
-        shutil.rmtree(out)
+    base = _profiled_seconds(task, cfg.with_budget(steps=cfg.learning_starts + short))
+    full = _profiled_seconds(task, cfg.with_budget(steps=cfg.learning_starts + learning_steps))
     wall = time.perf_counter() - began
-    stats = pstats.Stats(profiler)
-    seconds = {part: _cumulative(stats, targets) for part, targets in PARTS.items()}
+    seconds = {part: full[part] - base[part] for part in full}
     parts = {
         "env_step": seconds["env_step"],
         "her_sampling": seconds["her_sample"] - seconds["reward_recompute"],
@@ -74,31 +93,41 @@ def profile(task: str, config: str, learning_steps: int) -> dict:
         "buffer_add": seconds["buffer_add"],
     }
     parts["sb3_loop_rest"] = seconds["learn"] - sum(parts.values())
-    learning_only = ("her_sampling", "reward_recompute", "gradient_step")
+    steps = learning_steps - short
     return {
-        "task": task,
-        "config": config,
+        "backend": cfg.backend,
+        "n_envs": cfg.n_envs,
         "net_arch": list(cfg.net_arch),
         "batch_size": cfg.batch_size,
-        "env_steps": cfg.steps,
-        "learning_steps": learning_steps,
+        "measured_env_steps": steps,
         "profiled_wall_seconds": round(wall, 1),
         "seconds": {k: round(v, 3) for k, v in parts.items()},
         "share": {k: round(v / seconds["learn"], 3) for k, v in parts.items()},
-        # The learning phase's cost of one env step: its own parts per learning step, the
-        # others (taken on every env step, warm-up included) per env step.
-        "ms_per_learning_env_step": {
-            k: round(1000 * v / (learning_steps if k in learning_only else cfg.steps), 3)
-            for k, v in parts.items()
-        },
+        "ms_per_learning_env_step": {k: round(1000 * v / steps, 3) for k, v in parts.items()},
     }
+
+
+def _profiled_seconds(task: str, cfg: TQCConfig) -> dict[str, float]:
+    """Cumulative seconds of each of PARTS' functions in one training run."""
+    out = Path(tempfile.mkdtemp(prefix="tqc_profile_"))
+    profiler = cProfile.Profile()
+    try:
+        profiler.enable()
+        train_tqc(
+            task, "sparse", cfg, out / "run", eval_every=cfg.steps, eval_episodes=1, progress=False
+        )
+        profiler.disable()
+    finally:
+        shutil.rmtree(out)
+    stats = pstats.Stats(profiler)
+    return {part: _cumulative(stats, targets) for part, targets in PARTS.items()}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="push")
     parser.add_argument("--config", default="cpu")
-    parser.add_argument("--learning-steps", type=int, default=1000)
+    parser.add_argument("--learning-steps", type=int, default=1600)
     args = parser.parse_args()
     write_report(
         "tqc_her_profile",

@@ -79,7 +79,14 @@ def _offset(task: Any) -> np.ndarray:
 
 
 def goal_box(task: Any) -> tuple[np.ndarray, np.ndarray]:
-    """The world-coordinate box that `task` (a panda-gym task) draws its goals from."""
+    """The world-coordinate box that `task` (a panda-gym task) draws its goals from; a task
+    whose desired goal is more than one position (Stack: two cubes) is refused."""
+    size = task.get_goal().size
+    if size != len(AXES):
+        raise GcdtError(
+            f"{type(task).__name__}'s desired goal is {size // len(AXES)} positions: a goal of "
+            "your choice works on tasks with one (Reach, Push, PickAndPlace, Slide)"
+        )
     offset = _offset(task)
     return task.goal_range_low + offset, task.goal_range_high + offset
 
@@ -88,19 +95,8 @@ def _box_text(low: np.ndarray, high: np.ndarray) -> str:
     return ", ".join(f"{a} [{lo:.3f}, {hi:.3f}]" for a, lo, hi in zip(AXES, low, high, strict=True))
 
 
-def check_single_goal(task: Any) -> None:
-    """Refuse a task whose desired goal is more than one position (Stack: two cubes)."""
-    size = task.get_goal().size
-    if size != len(AXES):
-        raise GcdtError(
-            f"{type(task).__name__}'s desired goal is {size // len(AXES)} positions: a goal of "
-            "your choice works on tasks with one (Reach, Push, PickAndPlace, Slide)"
-        )
-
-
 def check_goal(task: Any, goal: np.ndarray) -> None:
     """Refuse a desired goal that `task` (a panda-gym task) could never draw itself."""
-    check_single_goal(task)
     goal = np.asarray(goal, dtype=np.float64)
     low, high = goal_box(task)
     if goal.shape != low.shape or not np.all(np.isfinite(goal)):

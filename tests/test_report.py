@@ -161,6 +161,18 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     assert "![Fig. 3: success rate vs dataset size (RQ4)](figures/report-test/" in block
     assert "![Goal generalisation (ours): success inside vs outside" in block
     assert "**Goal-conditioning ablation**" in block and "deviates from the paper" in block
+    # Run files shared with another profile's results, byte for byte, are counted as such; a
+    # file of the same key whose content differs is not.
+    assert "byte for byte" not in block
+    smoke_runs = tmp_path / "results" / "smoke" / "runs"
+    smoke_runs.mkdir(parents=True)
+    own = sorted((tmp_path / "results" / PROFILE.name / "runs").glob("*.json"))
+    for path in own[:3]:
+        (smoke_runs / path.name).write_bytes(path.read_bytes())
+    (smoke_runs / own[3].name).write_text("{}")
+    assert "3 of its run files are the `smoke` profile's, byte for byte" in (
+        report.readme_block(PROFILE)
+    )
 
 
 def test_report_cli_rejects_a_negative_wall_time(capsys):

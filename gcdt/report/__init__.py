@@ -246,7 +246,31 @@ def _wall_time_text(profile: Profile) -> str:
             "their own time) were already done when it started (an interrupted reproduction, "
             "resumed) and are not in its wall time."
         )
+    for other, count in _shared_runs(profile).items():
+        text += (
+            f" {count} of its run files are the `{other}` profile's, byte for byte: the same "
+            "run keys (the same specs), done once for both."
+        )
     return text
+
+
+def _shared_runs(profile: Profile) -> dict[str, int]:
+    """Other profiles' results that hold some of `profile`'s run files, identical: how many."""
+    own = results_dir(profile.name) / "runs"
+    shared = {}
+    for other in PROFILES:
+        theirs = results_dir(other) / "runs"
+        if other == profile.name or not theirs.is_dir() or not own.is_dir():
+            continue
+        count = sum(
+            1
+            for path in own.glob("*.json")
+            if (theirs / path.name).is_file()
+            and (theirs / path.name).read_bytes() == path.read_bytes()
+        )
+        if count:
+            shared[other] = count
+    return shared
 
 
 def readme_block(profile: Profile) -> str:

@@ -56,6 +56,7 @@ bench: install
 	  $(PY) benchmarks/collection_throughput.py --task $$task || exit 1; done
 	$(PY) benchmarks/dataset_io.py --task push
 	$(PY) benchmarks/tqc_her.py throughput
+	$(PY) benchmarks/tqc_her_profile.py
 	$(PY) benchmarks/run_costs.py
 	$(PY) benchmarks/end_to_end.py
 	$(PY) benchmarks/summary.py --docs

@@ -256,15 +256,15 @@ def _wall_time_text(profile: Profile) -> str:
 
 def _shared_runs(profile: Profile) -> dict[str, int]:
     """Other profiles' results that hold some of `profile`'s run files, identical: how many."""
-    own = results_dir(profile.name) / "runs"
+    own = sorted((results_dir(profile.name) / "runs").glob("*.json"))
     shared = {}
     for other in PROFILES:
         theirs = results_dir(other) / "runs"
-        if other == profile.name or not theirs.is_dir() or not own.is_dir():
+        if other == profile.name or not theirs.is_dir():
             continue
         count = sum(
             1
-            for path in own.glob("*.json")
+            for path in own
             if (theirs / path.name).is_file()
             and (theirs / path.name).read_bytes() == path.read_bytes()
         )

@@ -1,11 +1,13 @@
 """Per-run costs as a local sweep sees them: two runs side by side, one torch thread each.
 
-    python benchmarks/run_costs.py [--dt-steps 150] [--bc-steps 1000] [--eval-steps 1000]
+    python benchmarks/run_costs.py [--dt-steps 100] [--bc-steps 1000] [--eval-steps 10000]
 
 Each of two spawned workers trains GC-DT and BC on the same PickAndPlace expert data (the
 paper's model config, batch 64) and evaluates both; the report gives seconds per gradient
 step and evaluation env steps/s (the median of the workers) -> results/bench/run_costs.json,
-which `gcdt sweep --dry-run` uses for its estimates.
+which `gcdt sweep --dry-run` uses for its estimates. The DT is also evaluated on 4 envs, as
+the grid's runs are (`eval_envs`), with the envs in processes of their own and in the run's
+own process (`in_process`, what a run of one core does): `dt_eval_4_envs_in_process_speedup`.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import argparse
 import multiprocessing as mp
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from statistics import median
 
@@ -48,6 +51,22 @@ def _worker(args: tuple[str, int, int, int, int]) -> dict[str, float]:
                 policy, dataset.task, "sparse", timesteps=eval_steps, seed=seed, progress=False
             ).summary
             out[f"{method}_eval_steps_per_second"] = summary["steps_per_second"]
+            if method == "dt":  # the grid's 4 envs, in processes and in this one
+                for in_process, name in ((False, "processes"), (True, "in_process")):
+                    result = evaluate(
+                        policy,
+                        dataset.task,
+                        "sparse",
+                        timesteps=eval_steps,
+                        n_envs=4,
+                        seed=seed,
+                        in_process=in_process,
+                        progress=False,
+                    )
+                    # Wall time, the envs' start included: what a run pays for its evaluation.
+                    out[f"dt_eval_4_envs_{name}_steps_per_second"] = (
+                        result.timesteps / result.wall_seconds
+                    )
     return out
 
 
@@ -55,16 +74,22 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dt-steps", type=int, default=100)
     parser.add_argument("--bc-steps", type=int, default=1000)
-    parser.add_argument("--eval-steps", type=int, default=1000)
+    parser.add_argument("--eval-steps", type=int, default=10_000)  # the grid's evaluation
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "pnp.npz"
         policy = make_policy("scripted", "pick_and_place")
         collect(policy, "pick_and_place", 2000, seed=0, progress=False).save(path)
         jobs = [(str(path), seed, args.dt_steps, args.bc_steps, args.eval_steps) for seed in (0, 1)]
-        with mp.get_context("spawn").Pool(2) as pool:
-            cells = pool.map(_worker, jobs)
+        # As the sweep's workers: spawned, and free to start env processes (a Pool's are not).
+        with ProcessPoolExecutor(2, mp_context=mp.get_context("spawn")) as pool:
+            cells = list(pool.map(_worker, jobs))
     results = {k: round(median(c[k] for c in cells), 5) for k in cells[0]}
+    results["dt_eval_4_envs_in_process_speedup"] = round(
+        results["dt_eval_4_envs_in_process_steps_per_second"]
+        / results["dt_eval_4_envs_processes_steps_per_second"],
+        3,
+    )
     write_report(
         "run_costs",
         "run_costs.py",

@@ -171,10 +171,18 @@ def _goal_range(task: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def make_vec_env(
-    task: str, reward: str, n_envs: int, *, context: str | None = "spawn", **env_kwargs
+    task: str,
+    reward: str,
+    n_envs: int,
+    *,
+    in_process: bool = False,
+    context: str | None = "spawn",
+    **env_kwargs,
 ) -> gym.vector.VectorEnv:
-    """`n_envs` copies of the env: in-process for one, one process each (`AsyncVectorEnv`) else.
-    `env_kwargs` go to `make_env` (e.g. `render_width`).
+    """`n_envs` copies of the env: one process each (`AsyncVectorEnv`), or all in this process,
+    stepped one after another (`SyncVectorEnv`), for one env or with `in_process`. Both give
+    the same episodes: each env is its own Bullet client either way. `env_kwargs` go to
+    `make_env` (e.g. `render_width`).
 
     Autoreset is disabled: the caller resets finished envs itself, with explicit seeds
     (`reset(seed=[...], options={"reset_mask": done})`), because panda-gym's own seed-less
@@ -186,8 +194,8 @@ def make_vec_env(
     env_id(task, reward)  # validate names in this process, before any worker starts
     factory = functools.partial(make_env, task, reward, **env_kwargs)
     mode = gym.vector.AutoresetMode.DISABLED
-    if n_envs == 1:
-        return gym.vector.SyncVectorEnv([factory], autoreset_mode=mode)
+    if n_envs == 1 or in_process:
+        return gym.vector.SyncVectorEnv([factory] * n_envs, autoreset_mode=mode)
     return gym.vector.AsyncVectorEnv([factory] * n_envs, autoreset_mode=mode, context=context)
 
 

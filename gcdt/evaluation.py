@@ -41,7 +41,14 @@ class EvaluationConfig:
         None, f"env steps in total (default {DEFAULT_TIMESTEPS})", minimum=1
     )
     episodes: int | None = setting(None, "run this many whole episodes", minimum=1)
-    n_envs: int = setting(1, "parallel env processes", minimum=1)
+    n_envs: int = setting(1, "envs stepped side by side, one process each", minimum=1)
+    # Env processes pay only where there are idle cores to step them on; on a busy core their
+    # messages cost more than they save (the grid gives each run one core).
+    in_process: bool = setting(
+        False,
+        "step the envs one after another in this process: the same episodes, faster "
+        "where the evaluation has one core",
+    )
     seed: int = setting(0, "episode j is reset with episode_seed(seed, j)", minimum=0)
 
     def __post_init__(self) -> None:
@@ -128,6 +135,7 @@ def evaluate(
     episodes: int | None = _PAPER.episodes,
     n_envs: int = _PAPER.n_envs,
     seed: int = _PAPER.seed,
+    in_process: bool = _PAPER.in_process,
     goal_region: GoalRegion | None = None,
     progress: bool = True,
 ) -> EvaluationResult:
@@ -135,13 +143,18 @@ def evaluate(
 
     Give either `timesteps` (the paper's protocol; the default, 10,000) or `episodes` (that
     many whole episodes, independent of their lengths); `EvaluationConfig` checks them.
-    `n_envs > 1` steps envs in parallel processes, and the policy sees the whole batch each
-    step. With `goal_region`, the envs draw their desired goals from that region only.
+    `n_envs > 1` steps envs side by side, in processes of their own unless `in_process` (the
+    episodes are the same either way), and the policy sees the whole batch each step. With
+    `goal_region`, the envs draw their desired goals from that region only.
     """
-    config = EvaluationConfig(timesteps=timesteps, episodes=episodes, n_envs=n_envs, seed=seed)
+    config = EvaluationConfig(
+        timesteps=timesteps, episodes=episodes, n_envs=n_envs, seed=seed, in_process=in_process
+    )
     timesteps = config.total_timesteps()
     env_kwargs = None if goal_region is None else {"goal_region": goal_region}
-    rollout = VectorRollout(policy, task, reward, n_envs, seed, env_kwargs=env_kwargs)
+    rollout = VectorRollout(
+        policy, task, reward, n_envs, seed, env_kwargs=env_kwargs, in_process=in_process
+    )
 
     records: list[EpisodeRecord] = []
     started = time.perf_counter()

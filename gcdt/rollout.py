@@ -47,7 +47,8 @@ class VectorRollout:
     ended, with the next episode indices in env order. The run is deterministic for a given
     `seed` and `n_envs` (each env then sees the same history; see `gcdt.envs` on Bullet's warm
     starts). `stream` is the purpose the episodes' seeds are drawn for (`SEED_STREAMS` in
-    `gcdt.envs`). `env_kwargs` go to each env's constructor (e.g. `render_width`). `obs`, the
+    `gcdt.envs`). `env_kwargs` go to each env's constructor (e.g. `render_width`); `in_process`
+    steps the envs in this process rather than one process each (`make_vec_env`). `obs`, the
     observation the next step acts in, may be replaced after a change to the envs.
     """
 
@@ -62,6 +63,7 @@ class VectorRollout:
         env_kwargs: Mapping[str, Any] | None = None,
         on_step: Callable[[VectorStep], None] | None = None,
         stream: str = "evaluation",
+        in_process: bool = False,
     ) -> None:
         spec = get_task(task)
         check_reward(reward)
@@ -81,12 +83,15 @@ class VectorRollout:
         self.n_envs, self.seed, self.stream = int(n_envs), int(seed), stream
         episode_seed(self.seed, 0, stream)  # an unknown stream fails here, before envs start
         self.env_kwargs, self.on_step = dict(env_kwargs or {}), on_step
+        self.in_process = in_process
         if self.env_kwargs.get("goal_region") is not None:  # a region without goals fails
             make_env(self.task, reward, goal_region=self.env_kwargs["goal_region"]).close()
         self.stepping_started = 0.0  # perf_counter() once the envs are up and reset
 
     def __enter__(self) -> VectorRollout:
-        self.envs = make_vec_env(self.task, self.reward, self.n_envs, **self.env_kwargs)
+        self.envs = make_vec_env(
+            self.task, self.reward, self.n_envs, in_process=self.in_process, **self.env_kwargs
+        )
         try:
             self.policy.reset(self.n_envs, self.seed)
             self.episode = np.arange(self.n_envs, dtype=np.int64)

@@ -95,7 +95,7 @@ def test_episodes_mode_two_envs_counts_exactly(alternating_policy):
 
 
 def test_deterministic_for_seed_and_n_envs():
-    def run(seed):
+    def run(seed, in_process=False):
         return evaluate(
             ScriptedExpert("push", noise_std=0.3),
             "push",
@@ -103,12 +103,15 @@ def test_deterministic_for_seed_and_n_envs():
             timesteps=400,
             n_envs=2,
             seed=seed,
+            in_process=in_process,
             progress=False,
         ).episodes
 
     first, again, other = run(5), run(5), run(6)
     assert first == again
     assert first != other
+    # The envs stepped in this process play exactly the episodes of the env processes.
+    assert run(5, in_process=True) == first
 
 
 @pytest.mark.parametrize(

@@ -122,6 +122,9 @@ def _evaluate(policy: Any, spec: RunSpec, seed: int) -> dict[str, Any]:
         timesteps=spec.eval_timesteps,
         n_envs=spec.eval_envs,
         seed=seed,
+        # A run of one core steps its envs in its own process: the same episodes, without
+        # the messages to env processes that would share that core (`EvaluationConfig`).
+        in_process=spec.threads == 1,
         goal_region=None if spec.eval_region is None else GoalRegion.parse(spec.eval_region),
         progress=False,
     ).summary

@@ -41,7 +41,9 @@ class EvaluationConfig:
         None, f"env steps in total (default {DEFAULT_TIMESTEPS})", minimum=1
     )
     episodes: int | None = setting(None, "run this many whole episodes", minimum=1)
-    n_envs: int = setting(1, "envs stepped side by side, one process each", minimum=1)
+    n_envs: int = setting(
+        1, "envs stepped side by side, each in a process of its own unless in_process", minimum=1
+    )
     # Env processes pay only where there are idle cores to step them on; on a busy core their
     # messages cost more than they save (the grid gives each run one core).
     in_process: bool = setting(

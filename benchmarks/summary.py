@@ -31,6 +31,14 @@ def _table(header: list[str], rows: list[list]) -> str:
     return "\n".join(lines)
 
 
+def _cpu(report: dict) -> str:
+    """The machine a report ran on, in words: the CPU generation changes these rates ~3x."""
+    m = report["machine"]
+    extension = {True: "with", False: "without"}.get(m.get("cpu_bf16"))
+    bf16 = f" {extension} AVX512-BF16" if extension else ""
+    return f"{m['cores']} cores of {m['cpu']}{bf16}"
+
+
 def _pct(x: float) -> str:
     return f"{100 * x:.0f} %"
 
@@ -360,7 +368,8 @@ def tqc_section() -> str | None:
             f"TQC+HER training speed on {speed['task']}, env steps/s once gradient steps run, "
             "today's loop (sb3-contrib's TQC on one env, rl-baselines3-zoo's) against the "
             f"configs' ({new['backend']} backend on {new['n_envs']} envs, one gradient step "
-            "per env step), measured in one run (`benchmarks/tqc_her.py throughput`; hours: "
+            f"per env step), measured in one run on {_cpu(speed)} "
+            "(`benchmarks/tqc_her.py throughput`; hours: "
             f"the paper's step budget of that task at each speed; {speed['target']}):\n\n"
             + _table(["config", "networks", "batch", "sb3, 1 env", "new", "speedup", "hours"], rows)
         )

@@ -603,7 +603,8 @@ def _tqc_parser(sub: argparse._SubParsersAction) -> None:
     tt.add_argument(
         "--backend",
         choices=list(TQC_BACKENDS),
-        help="sbx: SBX's JAX TQC, 2.8x faster on CPU; sb3: sb3-contrib's (default: the config's)",
+        help="sbx: SBX's JAX TQC, 2.5-2.8x faster on CPU; sb3: sb3-contrib's "
+        "(default: the config's)",
     )
     tt.add_argument(
         "--n-envs", type=_positive_int, metavar="N", help="envs side by side (default: config's)"

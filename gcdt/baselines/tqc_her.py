@@ -1,17 +1,17 @@
 """TQC+HER, the paper's online baseline and the source of its expert datasets.
 
-TQC with Stable-Baselines3's `HerReplayBuffer` on panda-gym, in one of two implementations
-by the same maintainers (the `backend`): `sb3` is sb3-contrib's PyTorch TQC, the loop
+TQC with Stable-Baselines3's `HerReplayBuffer` on panda-gym, in one of two implementations by
+the same maintainers (the `backend`): `sb3` is sb3-contrib's PyTorch TQC, the loop
 rl-baselines3-zoo runs; `sbx` is SBX's JAX TQC, whose whole gradient step is one compiled
-function, 2.8x faster on 2 CPU cores (`python benchmarks/tqc_her.py throughput`). `n_envs` envs step
-side by side and each loop iteration takes `n_envs` gradient steps, so the updates per env
-step stay the zoo's. The hyperparameters live in `tqc_her.yaml` next to this file (`paper` =
-rl-baselines3-zoo's her-defaults); a config or a profile may change budget and loop values
-only, and every run records what it changed. During training the project's own evaluator
+function, 2.5-2.8x faster on 2 CPU cores (`python benchmarks/tqc_her.py throughput`). `n_envs`
+envs step side by side and each loop iteration takes `n_envs` gradient steps, so the updates
+per env step stay the zoo's. The hyperparameters live in `tqc_her.yaml` next to this file
+(`paper` = rl-baselines3-zoo's her-defaults); a config or a profile may change budget and loop
+values only, and every run records what it changed. During training the project's own evaluator
 measures the current policy every `eval_every` env steps (success rate and return ->
-`eval.csv`, for learning curves); the best and the last model are saved as SB3 zips that
-carry the task, reward, config and backend they were trained with, and `run.json` records
-the wall-clock time and env steps/s.
+`eval.csv`, for learning curves); the best and the last model are saved as SB3 zips that carry
+the task, reward, config and backend they were trained with, and `run.json` records the
+wall-clock time and env steps/s.
 
 Output folder: `model.zip` (last), `best_model.zip`, `eval.csv`, `run.json`.
 """

@@ -101,6 +101,26 @@ def test_figures_plot_the_means_over_seeds(runs):
     np.testing.assert_array_equal(fig.axes[0].lines[0].get_xdata(), [0, 50, 100])
 
 
+def test_curve_tables_hold_the_figures_points(runs):
+    curve = tables.curve_table(runs, "rq5", "expert_ratio")
+    assert list(curve["task"]) == ["reach"] * 3 + ["push"] * 3  # the paper's task order
+    assert list(curve["expert_ratio"]) == [0.0, 0.5, 1.0] * 2
+    push_half = curve[(curve["task"] == "push") & (curve["expert_ratio"] == 0.5)].iloc[0]
+    expected = 100 * np.array([0.45, 0.55, 0.65])  # 0.5 * 0.5 + 0.2 for gcdt + 0.1 * seed
+    assert push_half["success_mean"] == pytest.approx(expected.mean())
+    assert push_half["seeds"] == 3
+    md = tables.curve_markdown(curve, "expert_ratio")
+    assert md.splitlines()[0] == "| reward | task | 0 % | 50 % | 100 % |"
+    low, high = push_half["success_ci_low"], push_half["success_ci_high"]
+    assert f"| 55.0 [{low:.1f}, {high:.1f}] |" in md.splitlines()[-1]
+    # The figure draws exactly these points.
+    line = figures.expert_ratio_figure(runs).axes[0].containers[1].lines[0]  # Push's errorbar
+    ydata = np.asarray(line.get_ydata(), dtype=float)
+    np.testing.assert_allclose(ydata, curve[curve["task"] == "push"]["success_mean"])
+    empty = tables.curve_table(runs[runs["method"] != "gcdt"], "rq4", "size")
+    assert empty.empty and "No runs" in tables.curve_markdown(empty, "size")
+
+
 def test_no_results_say_what_to_run(tmp_path):
     with pytest.raises(GcdtError, match="run `gcdt sweep --profile report-test`"):
         tables.load_runs(PROFILE, tmp_path)

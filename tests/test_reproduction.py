@@ -182,7 +182,8 @@ def test_notebooks_and_report_render_from_results_with_the_artifacts_deleted(tmp
             "fig4_expert_ratio",
         ):
             assert (figures_dir("smoke", outputs) / f"{name}.png").stat().st_size > 0
-        assert (results_dir("smoke", outputs) / "table1.csv").exists()
+        for name in ("table1.csv", "fig3_dataset_size.csv", "fig4_expert_ratio.csv"):
+            assert (results_dir("smoke", outputs) / name).exists(), name
         papermill.execute_notebook(
             str(REPO_ROOT / "notebooks" / "07_explorer.ipynb"),
             str(tmp_path / "07.ipynb"),

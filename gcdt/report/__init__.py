@@ -1,13 +1,13 @@
 """Tables and figures of the paper from `results/<profile>/` alone: `gcdt report`.
 
 write_report(profile) writes Table 1 and the ablation table (CSV, Markdown, LaTeX) and, where
-the profile makes them, the return-target and goal-generalisation studies
-(`gcdt.report.targets`, `gcdt.report.generalisation`) into results/<profile>/, Fig. 2-4, the
-learning curves and the studies' figures (PNG, PDF) into figures/<profile>/, and
-results/<profile>/report.md, which also lists the profile's deviations from the paper; both
-folders lie under `gcdt.paths.outputs_root()` (the repository, or a reproduction's own).
-`make reproduce` adds results/<profile>/reproduce.json: its measured wall time. The notebooks'
-helpers (`show`, `run_grid`) are here too.
+the profile makes them, the points of Fig. 3 and Fig. 4 (CSV, Markdown), the return-target and
+goal-generalisation studies (`gcdt.report.targets`, `gcdt.report.generalisation`) into
+results/<profile>/, Fig. 2-4, the learning curves and the studies' figures (PNG, PDF) into
+figures/<profile>/, and results/<profile>/report.md, which also lists the profile's deviations
+from the paper; both folders lie under `gcdt.paths.outputs_root()` (the repository, or a
+reproduction's own). `make reproduce` adds results/<profile>/reproduce.json: its measured wall
+time. The notebooks' helpers (`show`, `run_grid`) are here too.
 """
 
 from __future__ import annotations
@@ -125,6 +125,16 @@ def write_tables(profile: Profile, runs) -> list[Path]:
             ("csv", table.to_csv(index=False, float_format="%.4f")),
             ("md", tables.to_markdown(table, paper=name == "table1") + "\n"),
             ("tex", tables.to_latex(table, caption, f"tab:{name}")),
+        ):
+            write_if_changed(out / f"{name}.{ext}", text)
+            written.append(out / f"{name}.{ext}")
+    for name, (section, x) in tables.CURVES.items():  # Fig. 3 and Fig. 4's points
+        curve = tables.curve_table(runs, section, x)
+        if curve.empty:
+            continue
+        for ext, text in (
+            ("csv", curve.to_csv(index=False, float_format="%.4f")),
+            ("md", tables.curve_markdown(curve, x) + "\n"),
         ):
             write_if_changed(out / f"{name}.{ext}", text)
             written.append(out / f"{name}.{ext}")

@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt
 import pandas as pd
 
 from gcdt.paths import figures_dir, write_if_changed
-from gcdt.report.tables import TASK_NAMES, aggregate
+from gcdt.report.tables import TASK_NAMES, curve_table
 
 FORMATS = ("png", "pdf")
 
@@ -62,16 +62,15 @@ def _success_panels(
 ) -> plt.Figure | None:
     """Success rate (%) against `x`: one panel per reward, one line per task, 95 % intervals
     (None when no run belongs to `section`)."""
-    sel = runs[runs["sections"].apply(lambda s: section in s) & (runs["method"] == "gcdt")]
-    if sel.empty:
+    table = curve_table(runs, section, x)
+    if table.empty:
         return None
-    fig, axes, rewards = reward_panels(set(sel["reward"]), sharey=True)
+    fig, axes, rewards = reward_panels(set(table["reward"]), sharey=True)
     for ax, reward in zip(axes[0], rewards, strict=True):
         for task in TASK_NAMES:
-            cell = sel[(sel["reward"] == reward) & (sel["task"] == task)]
-            if cell.empty:
+            stats = table[(table["reward"] == reward) & (table["task"] == task)]
+            if stats.empty:
                 continue
-            stats = aggregate(cell, [x]).sort_values(x)
             mean = stats["success_mean"].to_numpy()
             ax.errorbar(
                 stats[x] * scale,

@@ -60,13 +60,8 @@ def _points(runs: pd.DataFrame) -> pd.DataFrame:
             c,
             ("success", "return"),
         )
-    for section, x, label in (("rq4", "size", "Fig. 3"), ("rq5", "expert_ratio", "Fig. 4")):
-        sel = runs[
-            runs["sections"].apply(lambda s, sec=section: sec in s) & (runs["method"] == "gcdt")
-        ]
-        if sel.empty:
-            continue
-        for _, c in tables.aggregate(sel.sort_values(x), ["task", "reward", x]).iterrows():
+    for (section, x), label in zip(tables.CURVES.values(), ("Fig. 3", "Fig. 4"), strict=True):
+        for _, c in tables.curve_table(runs, section, x).iterrows():
             at = f"{int(c[x]):,} transitions" if x == "size" else f"{100 * c[x]:.0f} % expert"
             add(f"{label}: {where(c['task'], c['reward'])}, {at}", c, ("success",))
     return pd.DataFrame(rows, columns=["item", "metric", "value", "low", "high"])

@@ -160,6 +160,48 @@ def aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+#: Fig. 3 and Fig. 4: the grid section each is drawn from and the quantity on its x axis.
+CURVES = {"fig3_dataset_size": ("rq4", "size"), "fig4_expert_ratio": ("rq5", "expert_ratio")}
+
+
+def curve_table(runs: pd.DataFrame, section: str, x: str) -> pd.DataFrame:
+    """GC-DT per reward, task and `x` over the runs of `section` (Fig. 3: "rq4", "size";
+    Fig. 4: "rq5", "expert_ratio"), as `aggregate` gives it; empty without such runs."""
+    sel = runs[runs["sections"].apply(lambda s: section in s) & (runs["method"] == "gcdt")]
+    if sel.empty:
+        return pd.DataFrame()
+    table = aggregate(sel, ["reward", "task", x])
+    order = {task: i for i, task in enumerate(TASK_NAMES)}
+    keys = [table["reward"], table["task"].map(order), table[x]]
+    return table.iloc[np.lexsort(keys[::-1])].reset_index(drop=True)
+
+
+def curve_markdown(table: pd.DataFrame, x: str) -> str:
+    """`curve_table` as Markdown: one row per reward and task, one column per value of `x`,
+    cells 'success % [95 % interval over seeds]'; a sentence when there are none."""
+    if table.empty:
+        return "*No runs of this figure in this profile.*"
+    values = sorted(table[x].unique())
+    label = {"size": lambda v: f"{int(v):,}", "expert_ratio": lambda v: f"{100 * v:.0f} %"}[x]
+    lines = [
+        "| reward | task | " + " | ".join(label(v) for v in values) + " |",
+        "|---|---|" + "---|" * len(values),
+    ]
+    for (reward, task), group in table.groupby(["reward", "task"], sort=False):
+        cells = {row[x]: row for _, row in group.iterrows()}
+        lines.append(
+            f"| {reward} | {TASK_NAMES[task]} | "
+            + " | ".join(
+                f"{c['success_mean']:.1f} [{c['success_ci_low']:.1f}, {c['success_ci_high']:.1f}]"
+                if (c := cells.get(v)) is not None
+                else "--"
+                for v in values
+            )
+            + " |"
+        )
+    return "\n".join(lines)
+
+
 def datasets_table(runs: pd.DataFrame) -> pd.DataFrame:
     """The distinct training datasets of the runs (size, expert share, and the summary each
     run stored: episodes, mean length, success rate, mean returns), one row each."""

@@ -154,6 +154,19 @@ def test_directions_set_each_claim_of_the_paper_beside_ours(runs):
     )
 
 
+def test_directions_check_the_papers_floor_at_a_quarter_of_expert_data(tmp_path):
+    profile = dataclasses.replace(PROFILE, rq5_ratios=(0.0, 0.25, 1.0))
+    store = RunStore(tmp_path)
+    for entry in build_grid(profile):
+        metrics = {"success_rate": _success(entry.spec), "mean_return": 0.0, "episodes": 20}
+        _write_result(store, entry.spec, metrics)
+    table = tables.directions(tables.load_runs(profile, tmp_path)).set_index("comparison")
+    # 0.5 * 0.25 + 0.2 for gcdt + 0.1 * seed: 42.5 % over seeds 0-2, under the paper's 80 %.
+    floor = "RQ5, Push sparse: above 80 % success at 25 % expert"
+    assert table.loc[floor].tolist() == ["yes", "no (42.5 %)", False]
+    assert not any(c.startswith("RQ5, Reach sparse: above") for c in table.index)  # not claimed
+
+
 def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path))
     store = _write_runs(tmp_path / "results" / PROFILE.name / "runs")

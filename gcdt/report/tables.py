@@ -8,6 +8,7 @@ laid out like the paper's table: rewards as blocks, methods as rows, tasks as co
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -338,9 +339,18 @@ def _paper_trend(section: str, task: str) -> tuple[bool, str]:
     return True, "less success at 0 % expert than at 100 %"
 
 
+@dataclass(frozen=True)
+class Floor:
+    """A claim that GC-DT's success stays above `success` % at `expert_ratio` expert data."""
+
+    expert_ratio: float
+    success: float
+    tasks: tuple[str, ...]
+
+
 #: The paper's RQ5 claim for its complex tasks (Section V): success stays above 80 % with only
 #: 25 % expert data.
-RQ5_FLOOR = {"expert_ratio": 0.25, "success": 80.0, "tasks": ("push", "pick_and_place")}
+RQ5_FLOOR = Floor(expert_ratio=0.25, success=80.0, tasks=("push", "pick_and_place"))
 
 #: Success-rate differences below this many points count as equal: the paper's ties are
 #: exact (100 / 100), and one of our ~200 evaluation episodes is already half a point.
@@ -398,8 +408,8 @@ def directions(runs: pd.DataFrame) -> pd.DataFrame:
                     "agrees": lower == ours_lower,
                 }
             )
-            share, floor = RQ5_FLOOR["expert_ratio"], RQ5_FLOOR["success"]
-            if section == "rq5" and task in RQ5_FLOOR["tasks"] and share in means.index:
+            share, floor = RQ5_FLOOR.expert_ratio, RQ5_FLOOR.success
+            if section == "rq5" and task in RQ5_FLOOR.tasks and share in means.index:
                 above = bool(means[share] > floor)
                 rows.append(
                     {

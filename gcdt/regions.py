@@ -66,6 +66,20 @@ class GoalRegion:
         ]
         return ",".join(parts) or "everywhere"
 
+    def describe(self) -> str:
+        """For readers: "y=:0" reads "y ≤ 0", "y=0:" "y ≥ 0", "x=0:0.15" "0 ≤ x ≤ 0.15"."""
+        parts = []
+        for axis, lo, hi in zip(AXES, self.low, self.high, strict=True):
+            if math.isinf(lo) and math.isinf(hi):
+                continue
+            if math.isinf(lo):
+                parts.append(f"{axis} ≤ {hi:g}")
+            elif math.isinf(hi):
+                parts.append(f"{axis} ≥ {lo:g}")
+            else:
+                parts.append(f"{lo:g} ≤ {axis} ≤ {hi:g}")
+        return ", ".join(parts) or "everywhere"
+
     def contains(self, goals: np.ndarray) -> np.ndarray:
         """Which of `goals` ([n, 3], world coordinates) lie in the region."""
         goals = np.asarray(goals, dtype=np.float64)

@@ -55,6 +55,9 @@ def test_region_text_round_trips():
     assert region.low == (-0.1, -math.inf, 0.05) and region.high == (0.1, math.inf, math.inf)
     assert str(region) == "x=-0.1:0.1,z=0.05:" and GoalRegion.parse(str(region)) == region
     assert str(GoalRegion()) == "everywhere"
+    # For readers (tables, figures): bounds as inequalities.
+    assert region.describe() == "-0.1 ≤ x ≤ 0.1, z ≥ 0.05" and LEFT.describe() == "y ≤ 0"
+    assert GoalRegion().describe() == "everywhere"
 
 
 @pytest.mark.parametrize(

@@ -193,6 +193,12 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     assert "2 runs (2.0 h of their own time) were already done when it started" in block
     assert "![Fig. 3: success rate vs dataset size (RQ4)](figures/report-test/" in block
     assert "![Goal generalisation (ours): success inside vs outside" in block
+    # Each figure is followed by its numbers: Fig. 3's points, success inside and outside.
+    after = block.split("fig3_dataset_size.png)")[1]
+    assert after.startswith("\n\n| reward | task | ") and " [" in after.split("\n")[4]
+    regions = block.split("goal_generalisation.png)")[1]
+    assert "| success elsewhere (%) |" in regions and "| y ≤ 0 | " in regions
+    assert "] at y ≤ 0 | " in regions and "] at y ≥ 0 |" in regions
     assert "**Goal-conditioning ablation**" in block and "deviates from the paper" in block
     # Run files shared with another profile's results, byte for byte, are counted as such; a
     # file of the same key whose content differs is not.

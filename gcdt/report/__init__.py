@@ -283,11 +283,33 @@ def _shared_runs(profile: Profile) -> dict[str, int]:
     return shared
 
 
+#: The README's figures, where the profile makes them, each followed by its numbers.
+README_FIGURES = {
+    "fig3_dataset_size": "Fig. 3: success rate vs dataset size (RQ4)",
+    "fig4_expert_ratio": "Fig. 4: success rate vs expert share (RQ5)",
+    "return_target": "Return-target study (ours): success vs the target return",
+    "goal_generalisation": (
+        "Goal generalisation (ours): success inside vs outside the training goals' region"
+    ),
+}
+
+
+def _points_markdown(fig: str, runs) -> str:
+    """The numbers behind one of README_FIGURES, as Markdown (success and 95 % interval over
+    seeds): the curve's points, the best target return, or success inside vs outside."""
+    if fig in tables.CURVES:
+        section, x = tables.CURVES[fig]
+        return tables.curve_markdown(tables.curve_table(runs, section, x), x)
+    if fig == "return_target":
+        return targets.best_targets_markdown(targets.best_targets(runs))
+    return generalisation.generalisation_markdown(generalisation.generalisation_table(runs))
+
+
 def readme_block(profile: Profile) -> str:
     """The README's results section, all generated from results/<profile>/: Table 1 beside
     the paper's values, where ours and the paper's point in different directions, the
-    ablation, Fig. 3 and 4, the two studies' figures, the wall time and the profile's
-    deviations."""
+    ablation, Fig. 3 and 4 and the two studies' figures with their numbers, the wall time and
+    the profile's deviations."""
     runs = tables.load_runs(profile)
     name = profile.name
     parts = [
@@ -307,18 +329,9 @@ def readme_block(profile: Profile) -> str:
             "**Goal-conditioning ablation** (ours; not in the paper), same data:",
             tables.to_markdown(ablation, paper=False),
         ]
-    for fig, caption in (
-        ("fig3_dataset_size", "Fig. 3: success rate vs dataset size (RQ4)"),
-        ("fig4_expert_ratio", "Fig. 4: success rate vs expert share (RQ5)"),
-        ("return_target", "Return-target study (ours): success vs the target return"),
-        (
-            "goal_generalisation",
-            "Goal generalisation (ours): success inside vs outside the training goals' region",
-        ),
-    ):
-        path = figures.figures_dir(name) / f"{fig}.png"
-        if path.exists():
-            parts.append(f"![{caption}](figures/{name}/{fig}.png)")
+    for fig, caption in README_FIGURES.items():
+        if (figures.figures_dir(name) / f"{fig}.png").exists():
+            parts += [f"![{caption}](figures/{name}/{fig}.png)", _points_markdown(fig, runs)]
     parts.append(deviations_text(profile))
     return "\n\n".join(parts)
 

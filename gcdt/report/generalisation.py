@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from gcdt.regions import GoalRegion
 from gcdt.report.figures import reward_panels
 from gcdt.report.tables import METHOD_NAMES, TASK_NAMES, aggregate
 
@@ -40,13 +41,15 @@ def generalisation_markdown(table: pd.DataFrame) -> str:
             if part.empty
             else (
                 f"{part.iloc[0]['success_mean']:.1f} [{part.iloc[0]['success_ci_low']:.1f}, "
-                f"{part.iloc[0]['success_ci_high']:.1f}] in {part.iloc[0]['eval_region']}"
+                f"{part.iloc[0]['success_ci_high']:.1f}] at "
+                f"{GoalRegion.parse(part.iloc[0]['eval_region']).describe()}"
             )
             for part in (inside, outside)
         ]
         lines.append(
             f"| {reward} | {TASK_NAMES[task]} | {METHOD_NAMES[method]} | "
-            f"{rows.iloc[0]['train_region']} | {cells[0]} | {cells[1]} |"
+            f"{GoalRegion.parse(rows.iloc[0]['train_region']).describe()} | {cells[0]} | "
+            f"{cells[1]} |"
         )
     return "\n".join(lines)
 

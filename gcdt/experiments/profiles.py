@@ -2,8 +2,8 @@
 
 `paper` is the paper's protocol; `quick` a real, reduced reproduction of Table 1 for a 2-core
 CPU (4.4 h there on a fresh clone); `standard` adds Fig. 3 and Fig. 4 on every task and the
-return-target and goal-generalisation studies (about 12 h there); `smoke` runs every stage in
-minutes and its numbers mean nothing.
+return-target and goal-generalisation studies (27 h of work there, about 14 h); `smoke` runs
+every stage in minutes and its numbers mean nothing.
 `deviations(profile)` is the one text that lists how a profile differs from the paper; the
 README and the reports print it rather than restating it.
 """
@@ -219,7 +219,7 @@ STANDARD = dataclasses.replace(
     name="standard",
     description="quick's Table 1 plus Fig. 3 and Fig. 4 (RQ4, RQ5) on every task with sparse "
     "rewards and two studies beyond the paper (the return target, goals outside the training "
-    "region), 3 seeds; about 12 h on a 2-core CPU",
+    "region), 3 seeds; 27 h of work, about 14 h on a 2-core CPU",
     rq4=Scope(rewards=("sparse",)),
     rq5=Scope(rewards=("sparse",)),
     targets=Scope(),

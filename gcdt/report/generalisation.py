@@ -26,6 +26,18 @@ def generalisation_table(runs: pd.DataFrame) -> pd.DataFrame:
     return aggregate(sel, ["reward", "task", "method", "eval_region", "train_region"])
 
 
+def _region_cell(part: pd.DataFrame) -> str:
+    """'success [95 % interval] at REGION' for one evaluation region's row, '–' without one."""
+    if part.empty:
+        return "–"
+    row = part.iloc[0]
+    region = GoalRegion.parse(row["eval_region"]).describe()
+    return (
+        f"{row['success_mean']:.1f} [{row['success_ci_low']:.1f}, "
+        f"{row['success_ci_high']:.1f}] at {region}"
+    )
+
+
 def generalisation_markdown(table: pd.DataFrame) -> str:
     """One row per task and method: success inside the training region and outside it."""
     lines = [
@@ -34,22 +46,11 @@ def generalisation_markdown(table: pd.DataFrame) -> str:
         "|---|---|---|---|---|---|",
     ]
     for (reward, task, method), rows in table.groupby(["reward", "task", "method"], sort=False):
-        inside = rows[rows["eval_region"] == rows["train_region"]]
-        outside = rows[rows["eval_region"] != rows["train_region"]]
-        cells = [
-            "–"
-            if part.empty
-            else (
-                f"{part.iloc[0]['success_mean']:.1f} [{part.iloc[0]['success_ci_low']:.1f}, "
-                f"{part.iloc[0]['success_ci_high']:.1f}] at "
-                f"{GoalRegion.parse(part.iloc[0]['eval_region']).describe()}"
-            )
-            for part in (inside, outside)
-        ]
+        inside = rows["eval_region"] == rows["train_region"]
+        trained_on = GoalRegion.parse(rows.iloc[0]["train_region"]).describe()
         lines.append(
-            f"| {reward} | {TASK_NAMES[task]} | {METHOD_NAMES[method]} | "
-            f"{GoalRegion.parse(rows.iloc[0]['train_region']).describe()} | {cells[0]} | "
-            f"{cells[1]} |"
+            f"| {reward} | {TASK_NAMES[task]} | {METHOD_NAMES[method]} | {trained_on} | "
+            f"{_region_cell(rows[inside])} | {_region_cell(rows[~inside])} |"
         )
     return "\n".join(lines)
 

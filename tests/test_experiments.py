@@ -70,8 +70,11 @@ def test_paper_profile_is_the_paper_and_others_list_their_deviations():
     standard = deviations_text(get_profile("standard"))
     assert "RQ4 (Fig. 3) on reach, push, pick_and_place × sparse only" in standard
     assert "RQ4 subset sizes 5,000, 10,000, 20,000 instead of" in standard
-    assert "scripted experts" in quick and "instead of 1,000,000" in quick
-    assert "env steps" not in quick  # the paper's 10,000-step evaluation
+    assert "scripted experts" in standard and "20,000 transitions" in standard
+    assert "env steps" not in standard  # the paper's 10,000-step evaluation
+    # quick: standard's Table 1 at a quarter of the data and a shorter evaluation.
+    assert "5,000 transitions of expert (and of random) data instead of 1,000,000" in quick
+    assert "evaluation over 3,000 env steps instead of 10,000" in quick
     smoke = deviations_text(get_profile("smoke"))
     assert "evaluation over 100 env steps instead of 10,000" in smoke
     assert "learning rate 0.001 instead of 0.0001" in quick

@@ -88,9 +88,9 @@ reproduce: install
 	$(VENV)/bin/gcdt compare --profile $(PROFILE)
 
 # Maintainers: make the finished reproduction in $(REPRO_DIR) the published results/PROFILE/
-# and figures/PROFILE/, and regenerate README.md's results from them.
-# The README's results section shows README_PROFILE's; it is regenerated after any publish,
-# since it says which run files it shares with other profiles.
+# and figures/PROFILE/. README.md's results always show README_PROFILE's published results;
+# they are regenerated after any publish, since they say which run files they share with
+# other profiles.
 publish: install
 	$(VENV)/bin/gcdt publish --profile $(PROFILE) --from $(REPRO_DIR)
 	env -u GCDT_OUTPUTS $(VENV)/bin/gcdt report --profile $(README_PROFILE) --readme

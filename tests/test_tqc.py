@@ -321,3 +321,61 @@ def test_the_published_push_expert_reaches_goals_and_can_collect_a_grids_data(tm
         collecting_policy(dataclasses.replace(spec, expert_digest="0" * 16))
     with pytest.raises(GcdtError, match="no published expert agent at"):
         data_spec(dataclasses.replace(SMOKE, expert_agents={"push": "nope.zip"}), "push", 10, 1.0)
+
+
+def test_keep_lowest_keeps_what_a_sort_keeps_ties_included():
+    import jax.numpy as jnp
+
+    from gcdt.baselines.sbx_tqc import keep_lowest
+
+    rng = np.random.default_rng(0)
+    values = rng.integers(0, 6, size=(200, 50)).astype(np.float32)  # many ties
+    keep = np.asarray(keep_lowest(jnp.asarray(values), 46))
+    assert keep.shape == values.shape
+    assert (keep.sum(axis=1) == 46).all()
+    kept = np.sort(np.where(keep, values, np.inf), axis=1)[:, :46]
+    np.testing.assert_array_equal(kept, np.sort(values, axis=1)[:, :46])
+
+
+def test_sbx_backend_critic_update_is_sbx_s_own():
+    """The sort-free critic update: SBX's losses, and its new parameters up to float rounding."""
+    import jax
+    import jax.numpy as jnp
+    from sbx import TQC as SbxTQC
+
+    from gcdt.baselines.tqc_her import _build
+
+    cfg = load_tqc_config("cpu", "push").with_budget(net_arch=[32, 32], n_envs=1)
+    model = _build(cfg, "push", "sparse", seed=0, device="auto")
+    assert isinstance(model, SbxTQC) and type(model) is not SbxTQC
+    rng = np.random.default_rng(1)
+    batch, obs_dim = 64, sum(s.shape[0] for s in model.observation_space.spaces.values())
+    p = model.policy
+    args = (
+        p.n_target_quantiles,
+        p.actor_state,
+        p.qf1_state,
+        p.qf2_state,
+        model.ent_coef_state,
+        jnp.asarray(rng.normal(size=(batch, obs_dim)), dtype=jnp.float32),
+        jnp.asarray(rng.uniform(-1, 1, size=(batch, *model.action_space.shape)), dtype=jnp.float32),
+        jnp.asarray(rng.normal(size=(batch, obs_dim)), dtype=jnp.float32),
+        jnp.asarray(-1.0 * (rng.random(batch) < 0.8), dtype=jnp.float32),  # sparse rewards
+        jnp.zeros(batch),
+        jnp.full(batch, cfg.gamma),
+        jax.random.PRNGKey(7),
+    )
+    (ref_q1, ref_q2), ref_values, ref_key = SbxTQC.update_critic(*args)
+    (new_q1, new_q2), new_values, new_key = type(model).update_critic(*args)
+    np.testing.assert_allclose(np.asarray(new_values), np.asarray(ref_values), rtol=1e-6)
+    assert np.array_equal(np.asarray(new_key), np.asarray(ref_key))
+    moved = 0.0
+    for ref, new, old in zip(
+        jax.tree_util.tree_leaves((ref_q1.params, ref_q2.params)),
+        jax.tree_util.tree_leaves((new_q1.params, new_q2.params)),
+        jax.tree_util.tree_leaves((p.qf1_state.params, p.qf2_state.params)),
+        strict=True,
+    ):
+        np.testing.assert_allclose(np.asarray(new), np.asarray(ref), rtol=1e-5, atol=1e-7)
+        moved = max(moved, float(jnp.abs(new - old).max()))
+    assert moved > 1e-4  # the update did change the critics

@@ -378,4 +378,5 @@ def test_sbx_backend_critic_update_is_sbx_s_own():
     ):
         np.testing.assert_allclose(np.asarray(new), np.asarray(ref), rtol=1e-5, atol=1e-7)
         moved = max(moved, float(jnp.abs(new - old).max()))
+    model.get_env().close()
     assert moved > 1e-4  # the update did change the critics

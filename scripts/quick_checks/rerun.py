@@ -24,7 +24,7 @@ from pathlib import Path
 
 from gcdt.data.collect import LABELS
 from gcdt.experiments.grid import build_grid
-from gcdt.experiments.profiles import get_profile
+from gcdt.experiments.profiles import PROFILES, get_profile
 from gcdt.experiments.runner import execute_run
 
 
@@ -35,7 +35,9 @@ def main() -> None:
     parser.add_argument("reward")
     parser.add_argument("--out", required=True)
     parser.add_argument("--artifacts", default="artifacts/quick_checks/rerun")
-    parser.add_argument("--profile", default="standard", help="whose Table 1 grid")
+    parser.add_argument(
+        "--profile", default="standard", choices=list(PROFILES), help="whose Table 1 grid"
+    )
     parser.add_argument("--seed", type=int, default=0, help="the run's training seed")
     parser.add_argument("--noise", type=float, help="the scripted experts' action noise std")
     parser.add_argument("--labels", choices=LABELS, help="the action a noisy collection records")

@@ -323,6 +323,7 @@ def _check_loop(cfg: TQCConfig, device: str) -> None:
 def _build(cfg: TQCConfig, task: str, reward: str, seed: int, device: str) -> Any:
     """The backend's TQC with HER on `cfg.n_envs` envs, episode seeds shared out between them."""
     from stable_baselines3 import HerReplayBuffer
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     from gcdt.envs import SeededResets, make_env
@@ -340,7 +341,7 @@ def _build(cfg: TQCConfig, task: str, reward: str, seed: int, device: str) -> An
             for k in range(cfg.n_envs)
         ]
     )
-    return TQC(
+    model = TQC(
         "MultiInputPolicy",
         envs,
         buffer_size=cfg.buffer_size,
@@ -363,6 +364,9 @@ def _build(cfg: TQCConfig, task: str, reward: str, seed: int, device: str) -> An
         device=device,
         verbose=0,
     )
+    # Without a logger of its own, every `learn` makes an empty /tmp/SB3-<time> folder.
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
 
 
 def _device_name(model: Any, backend: str) -> str:

@@ -358,7 +358,8 @@ def tqc_section() -> str | None:
                 c["batch_size"],
                 f"{c['sb3']['env_steps_per_second']:.1f}",
                 f"{c['new']['env_steps_per_second']:.1f}",
-                f"{c['speedup_vs_sb3']:.2f}x",
+                f"{c['speedup_vs_sb3']:.2f}x"
+                + (" ({:.2f}-{:.2f})".format(*c["speedup_range"]) if "speedup_range" in c else ""),
                 " / ".join(f"{h:.1f}" for h in c["hours_for_paper_budget"].values()),
             ]
             for name, c in speed["configs"].items()
@@ -368,8 +369,9 @@ def tqc_section() -> str | None:
             f"TQC+HER training speed on {speed['task']}, env steps/s once gradient steps run, "
             "today's loop (sb3-contrib's TQC on one env, rl-baselines3-zoo's) against the "
             f"configs' ({new['backend']} backend on {new['n_envs']} envs, one gradient step "
-            f"per env step), measured in one run on {_cpu(speed)} "
-            "(`benchmarks/tqc_her.py throughput`; hours: "
+            f"per env step), measured in one run on {_cpu(speed)}, the two loops taking turns "
+            "(`benchmarks/tqc_her.py throughput`; env steps/s: the median over the rounds; "
+            "speedup: the median of the rounds' paired ratios, their range in parentheses; hours: "
             f"the paper's step budget of that task at each speed; {speed['target']}):\n\n"
             + _table(["config", "networks", "batch", "sb3, 1 env", "new", "speedup", "hours"], rows)
         )

@@ -4,12 +4,14 @@
     python benchmarks/tqc_her.py reach [--config cpu] [--steps N]
     python benchmarks/tqc_her.py push --run results/experts/tqc_push_sparse
 
-`throughput` trains each config of gcdt/baselines/tqc_her.yaml on `--task` with two loops in
-the same run, today's (`sb3`: sb3-contrib's TQC on one env, rl-baselines3-zoo's loop) and the
-config's own (SBX's TQC on 8 envs, as many gradient steps per env step), for the config's
-`learning_starts` random steps plus a fixed number of learning steps, and reports env steps/s
-of the learning phase (what decides how long a full run takes; the first iteration, where
-JAX compiles, left out) and `speedup_vs_sb3` -> results/bench/tqc_her_throughput.json.
+`throughput` builds, for each config of gcdt/baselines/tqc_her.yaml on `--task`, two models:
+today's loop (`sb3`: sb3-contrib's TQC on one env, rl-baselines3-zoo's) and the config's own
+(SBX's TQC on 8 envs, as many gradient steps per env step). After the config's
+`learning_starts` random steps and two loop iterations (where JAX compiles), the two take
+turns learning in equal chunks, several rounds, so that a shared machine's drifting speed hits
+both alike. It reports each loop's median env steps/s over the rounds (what decides how long a
+full run takes) and `speedup_vs_sb3`, the median of the rounds' paired ratios with their
+range -> results/bench/tqc_her_throughput.json.
 Target: >= 3x for the `cpu` config.
 
 `reach` trains TQC+HER on Reach with sparse and with dense rewards (models under
@@ -30,12 +32,13 @@ import argparse
 import csv
 import json
 import shutil
-import tempfile
+import statistics
+import time
 from pathlib import Path
 
 from common import write_report
 
-from gcdt.baselines.tqc_her import load_tqc_config, tqc_config_names, train_tqc
+from gcdt.baselines.tqc_her import build_tqc, load_tqc_config, tqc_config_names, train_tqc
 from gcdt.evaluation import evaluate
 from gcdt.paths import artifacts_dir
 from gcdt.policies import make_policy
@@ -44,51 +47,65 @@ TARGET_SUCCESS = 0.95
 TARGET_MINUTES = 15.0
 
 
-#: Learning steps measured per config (at --scale 1): ~1 minute of today's loop each.
+#: Learning steps measured per config and loop (at --scale 1), in ROUNDS equal chunks.
 LEARNING_STEPS = {"cpu": 4000, "paper": 160}
+ROUNDS = {"cpu": 10, "paper": 4}
 TARGET_SPEEDUP = 3.0
 #: Today's loop: the zoo's library on one env.
 SB3_LOOP = {"backend": "sb3", "n_envs": 1}
+
+
+def _learn_rate(model, steps: int) -> float:
+    """Env steps/s of `steps` more learning steps of `model`, picking up where it stopped."""
+    started = time.perf_counter()
+    model.learn(steps, reset_num_timesteps=False)
+    return steps / (time.perf_counter() - started)
 
 
 def throughput(task: str, scale: float) -> dict:
     cells = {}
     for name in tqc_config_names():
         base = load_tqc_config(name, task)
-        learning_steps = max(int(LEARNING_STEPS.get(name, 400) * scale) // 8 * 8, 16)
-        loops = {}
-        for loop, changes in (("sb3", SB3_LOOP), ("new", {})):
-            cfg = base.with_budget(steps=base.learning_starts + learning_steps, **changes)
-            out = Path(tempfile.mkdtemp(prefix=f"tqc_{name}_{loop}_"))
-            try:
-                result = train_tqc(
-                    task,
-                    "sparse",
-                    cfg,
-                    out / "run",
-                    eval_every=cfg.steps,
-                    eval_episodes=1,
-                    progress=False,
-                )
-            finally:
-                shutil.rmtree(out)
-            loops[loop] = {
-                "backend": cfg.backend,
-                "n_envs": cfg.n_envs,
-                "learning_steps": learning_steps,
-                "env_steps_per_second": round(result.learning_steps_per_second, 2),
-            }
-            print(name, loop, loops[loop], flush=True)
-        speed = {loop: cell["env_steps_per_second"] for loop, cell in loops.items()}
+        rounds = ROUNDS.get(name, 4)
+        chunk = max(int(LEARNING_STEPS.get(name, 400) * scale) // rounds // 8 * 8, 8)
+        cfgs = {"sb3": base.with_budget(**SB3_LOOP), "new": base}
+        models = {loop: build_tqc(cfg, task, "sparse", seed=0) for loop, cfg in cfgs.items()}
+        # The random steps, then two loop iterations: JAX compiles the update in the first and
+        # the policy's action in the second (the first after the random steps).
+        for model in models.values():
+            model.learn(base.learning_starts + 2 * cfgs["new"].n_envs)
+        # The loops take turns, the first of each round alternating, so that the machine's
+        # drift (a shared VM's speed wanders by 10-20 % within the hour) hits both alike; each
+        # round's speedup compares two chunks measured a minute apart.
+        rates = {loop: [] for loop in models}
+        for r in range(rounds):
+            for loop in sorted(models, reverse=r % 2 == 1):
+                rates[loop].append(_learn_rate(models[loop], chunk))
+            print(name, f"round {r}", {k: round(v[-1], 2) for k, v in rates.items()}, flush=True)
+        for model in models.values():
+            model.get_env().close()
+        ratios = [new / sb3 for sb3, new in zip(rates["sb3"], rates["new"], strict=True)]
+        speed = {loop: statistics.median(v) for loop, v in rates.items()}
         budget = load_tqc_config("paper", task).steps
         cells[name] = {
             "net_arch": list(base.net_arch),
             "batch_size": base.batch_size,
-            "sb3": loops["sb3"],
-            "new": loops["new"],
-            "speedup_vs_sb3": round(speed["new"] / speed["sb3"], 2),
+            **{
+                loop: {
+                    "backend": cfgs[loop].backend,
+                    "n_envs": cfgs[loop].n_envs,
+                    "learning_steps": chunk * rounds,
+                    "env_steps_per_second": round(speed[loop], 2),
+                    "per_round": [round(v, 2) for v in rates[loop]],
+                }
+                for loop in models
+            },
+            "rounds": rounds,
+            # The median of the rounds' paired ratios, and their range.
+            "speedup_vs_sb3": round(statistics.median(ratios), 2),
+            "speedup_range": [round(min(ratios), 2), round(max(ratios), 2)],
             # Kept under this name for the cost model (gcdt/experiments/costs.py).
-            "learning_steps_per_second": speed["new"],
+            "learning_steps_per_second": round(speed["new"], 2),
             "hours_for_paper_budget": {
                 loop: round(budget / rate / 3600, 2) for loop, rate in speed.items()
             },

@@ -603,7 +603,7 @@ def _tqc_parser(sub: argparse._SubParsersAction) -> None:
     tt.add_argument(
         "--backend",
         choices=list(TQC_BACKENDS),
-        help="sbx: SBX's JAX TQC, 2.6x faster on 2 CPU cores; sb3: sb3-contrib's "
+        help="sbx: SBX's JAX TQC, 2.7x faster on 2 CPU cores; sb3: sb3-contrib's "
         "(default: the config's)",
     )
     tt.add_argument(

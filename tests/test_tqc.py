@@ -343,10 +343,10 @@ def test_sbx_backend_critic_update_is_sbx_s_own():
     import jax.numpy as jnp
     from sbx import TQC as SbxTQC
 
-    from gcdt.baselines.tqc_her import _build
+    from gcdt.baselines.tqc_her import build_tqc
 
     cfg = load_tqc_config("cpu", "push").with_budget(net_arch=[32, 32], n_envs=1)
-    model = _build(cfg, "push", "sparse", seed=0, device="auto")
+    model = build_tqc(cfg, "push", "sparse", seed=0, device="auto")
     assert isinstance(model, SbxTQC) and type(model) is not SbxTQC
     rng = np.random.default_rng(1)
     batch, obs_dim = 64, sum(s.shape[0] for s in model.observation_space.spaces.values())

@@ -4,7 +4,7 @@ TQC with Stable-Baselines3's `HerReplayBuffer` on panda-gym, in one of two imple
 the same maintainers (the `backend`): `sb3` is sb3-contrib's PyTorch TQC, the loop
 rl-baselines3-zoo runs; `sbx` is SBX's JAX TQC, whose whole gradient step is one compiled
 function, with its critic target's sort replaced by a mask (`gcdt/baselines/sbx_tqc.py`):
-2.6x the env steps/s on 2 CPU cores (`python benchmarks/tqc_her.py throughput`). `n_envs`
+2.7x the env steps/s on 2 CPU cores (`python benchmarks/tqc_her.py throughput`). `n_envs`
 envs step side by side and each loop iteration takes `n_envs` gradient steps, so the updates
 per env step stay the zoo's. The hyperparameters live in `tqc_her.yaml` next to this file
 (`paper` = rl-baselines3-zoo's her-defaults); a config or a profile may change budget and loop
@@ -226,7 +226,7 @@ def train_tqc(
     _check_loop(cfg, device)
     commit = git_commit()  # the code the run starts with, not what the tree holds at its end
     out.mkdir(parents=True, exist_ok=True)
-    model = _build(cfg, spec.name, reward, seed, device)
+    model = build_tqc(cfg, spec.name, reward, seed, device)
     # Travels inside every saved zip: what `TQCPolicy` checks a model against.
     model.gcdt = {
         "task": spec.name,
@@ -320,8 +320,10 @@ def _check_loop(cfg: TQCConfig, device: str) -> None:
         )
 
 
-def _build(cfg: TQCConfig, task: str, reward: str, seed: int, device: str) -> Any:
-    """The backend's TQC with HER on `cfg.n_envs` envs, episode seeds shared out between them."""
+def build_tqc(cfg: TQCConfig, task: str, reward: str, seed: int, device: str = "auto") -> Any:
+    """An untrained TQC with HER of `cfg`'s backend on `cfg.n_envs` envs, episode seeds shared
+    out between them: for loops of one's own (the benchmarks); `train_tqc` makes a run."""
+    _check_loop(cfg, device)
     from stable_baselines3 import HerReplayBuffer
     from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import DummyVecEnv

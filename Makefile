@@ -17,7 +17,7 @@ NOTEBOOKS := $(sort $(wildcard notebooks/[0-9]*.ipynb))
 help:
 	@echo "make install    create $(VENV) from environment/ (no-op when up to date)"
 	@echo "make test       install, then run the test suite"
-	@echo "make lint       ruff over gcdt/, tests/, benchmarks/ and scripts/"
+	@echo "make lint       ruff over gcdt/, tests/, benchmarks/, scripts/ and notebooks/"
 	@echo "make bench      throughput benchmarks -> results/bench/*.json, docs/benchmarks.md"
 	@echo "make bench-tqc  TQC+HER trained on Reach to success -> results/bench/tqc_her_reach.json"
 	@echo "make reproduce  PROFILE=smoke|quick|standard|paper (default quick; its time: gcdt sweep --profile P --dry-run) [BACKEND=local|ray]:"
@@ -45,8 +45,8 @@ test: install
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 lint: install
-	$(VENV)/bin/ruff check gcdt tests benchmarks scripts
-	$(VENV)/bin/ruff format --check gcdt tests benchmarks scripts
+	$(VENV)/bin/ruff check gcdt tests benchmarks scripts notebooks
+	$(VENV)/bin/ruff format --check gcdt tests benchmarks scripts notebooks
 
 # Speed is measured here, never in unit tests. Do not run beside other heavy jobs: each
 # benchmark compares its cells side by side in one run, and the summary lands in docs/benchmarks.md.

@@ -76,7 +76,7 @@ def throughput(task: str, scale: float) -> dict:
             model.learn(base.learning_starts + 2 * cfgs["new"].n_envs)
         # The loops take turns, the first of each round alternating, so that the machine's
         # drift (a shared VM's speed wanders by 10-20 % within the hour) hits both alike; each
-        # round's speedup compares two chunks measured a minute apart.
+        # round's speedup compares two chunks measured back to back.
         rates = {loop: [] for loop in models}
         for r in range(rounds):
             for loop in sorted(models, reverse=r % 2 == 1):

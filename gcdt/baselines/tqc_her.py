@@ -223,10 +223,9 @@ def train_tqc(
     if taken:
         raise GcdtError(f"{out} already holds a TQC+HER run ({taken[0]}); choose another --out")
 
-    _check_loop(cfg, device)
     commit = git_commit()  # the code the run starts with, not what the tree holds at its end
+    model = build_tqc(cfg, spec.name, reward, seed, device)  # refuses a bad loop, writes nothing
     out.mkdir(parents=True, exist_ok=True)
-    model = build_tqc(cfg, spec.name, reward, seed, device)
     # Travels inside every saved zip: what `TQCPolicy` checks a model against.
     model.gcdt = {
         "task": spec.name,

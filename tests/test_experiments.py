@@ -13,7 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
+from gcdt.baselines.tqc_her import CONFIG_FILE
 from gcdt.checkpoint import load_checkpoint
 from gcdt.data import load_dataset
 from gcdt.envs import episode_seed, make_env
@@ -30,7 +32,9 @@ from gcdt.experiments import (
 )
 from gcdt.experiments.grid import RUN_SCHEMA
 from gcdt.experiments.profiles import SMOKE, Scope, target_seeds
+from gcdt.paths import REPO_ROOT
 from gcdt.regions import GoalRegion
+from gcdt.training import TrainConfig
 
 ONE = Scope(tasks=("reach",), rewards=("sparse",))
 #: Thirteen real runs on Reach in about a minute: Table 1 (GC-DT, BC, TQC+HER), one RQ4
@@ -147,6 +151,71 @@ def test_run_key_is_stable_and_complete():
     assert dataclasses.replace(spec, seed=1).key() != spec.key()
     assert dataclasses.replace(spec, eval_timesteps=61).key() != spec.key()
     assert dataclasses.replace(spec, learning_rate=1e-3).key() != spec.key()
+
+
+@pytest.mark.parametrize("name", ["quick", "standard"])
+def test_each_published_run_file_is_a_run_its_grid_names(name):
+    """The published results are filed under the keys the grid gives their runs today (run
+    scripts/migrate_run_keys.py after a change to how keys are computed)."""
+    runs = REPO_ROOT / "results" / name / "runs"
+    published = {path.stem: json.loads(path.read_text()) for path in runs.glob("*.json")}
+    grid = {e.spec.key(): e.spec for e in build_grid(get_profile(name))}
+    assert set(published) == set(grid)
+    for key, result in published.items():
+        assert result["key"] == key and result["schema"] == RUN_SCHEMA
+        assert result["spec"] == json.loads(json.dumps(grid[key].to_dict()))
+
+
+def _keys(profile) -> tuple[list[RunSpec], list[str], list[str]]:
+    """The grid's runs (in their stable order), their keys and their training keys."""
+    specs = [e.spec for e in build_grid(profile)]
+    return specs, [s.key() for s in specs], [s.training_key() for s in specs]
+
+
+def _changed(before: list[str], after: list[str]) -> set[int]:
+    return {i for i, (a, b) in enumerate(zip(before, after, strict=True)) if a != b}
+
+
+def test_a_changed_value_re_keys_exactly_the_runs_it_reaches(monkeypatch, tmp_path):
+    """A run's key hashes the values it computes from: one training default, one evaluation
+    setting, one tqc_her.yaml value each re-key the runs that use it, and no others."""
+    # quick, with Reach and PickAndPlace data collected by TQC+HER experts and Push data by a
+    # published agent (whose key is the zip's content hash).
+    agent = "results/experts/tqc_push_sparse/model.zip"
+    profile = dataclasses.replace(
+        get_profile("quick"), expert="tqc", expert_noise=0.0, expert_agents={"push": agent}
+    )
+    specs, keys, trained = _keys(profile)
+    tqc = {i for i, s in enumerate(specs) if s.method == "tqc"}
+    tqc_data = {i for i, s in enumerate(specs) if s.data is not None and s.data.expert == "tqc"}
+    offline = set(range(len(specs))) - tqc
+    assert tqc and tqc_data and offline - tqc_data  # every kind of run is there to tell apart
+
+    # A training default (dropout): every offline run, at training too; TQC+HER runs keep theirs.
+    fields = [("dropout", float, dataclasses.field(default=0.2))]
+    changed = dataclasses.make_dataclass("TrainConfig", fields, bases=(TrainConfig,), frozen=True)
+    with monkeypatch.context() as m:
+        m.setattr("gcdt.training.TrainConfig", changed)
+        _, new_keys, new_trained = _keys(profile)
+    assert _changed(keys, new_keys) == _changed(trained, new_trained) == offline
+
+    # An evaluation setting: every run's key, no run's training.
+    _, new_keys, new_trained = _keys(dataclasses.replace(profile, eval_timesteps=4_000))
+    assert _changed(keys, new_keys) == set(range(len(specs)))
+    assert not _changed(trained, new_trained)
+
+    # tqc_her.yaml: the profile's config (cpu) trains the TQC+HER runs and the experts.
+    config = yaml.safe_load(CONFIG_FILE.read_text())
+    edited = tmp_path / "tqc_her.yaml"
+    monkeypatch.setattr("gcdt.baselines.tqc_her.CONFIG_FILE", edited)
+    edited.write_text(yaml.safe_dump({**config, "cpu": {**config["cpu"], "batch_size": 128}}))
+    _, new_keys, new_trained = _keys(profile)
+    assert _changed(keys, new_keys) == _changed(trained, new_trained) == tqc | tqc_data
+    # A value cpu overrides, and a name: values, not names or overrides, make the key.
+    paper = {**config["paper"], "batch_size": 4096}
+    edited.write_text(yaml.safe_dump({**config, "paper": paper, "cpu2": config["cpu"]}))
+    renamed = dataclasses.replace(profile, tqc_config="cpu2")
+    assert _keys(renamed)[1] == keys
 
 
 def _results(root: Path) -> dict[str, dict]:
@@ -293,12 +362,15 @@ def test_corrupt_and_foreign_results_are_reported_and_rerun(local_sweep, tmp_pat
 
 def test_failing_run_is_recorded_and_the_others_complete(local_sweep, tmp_path, monkeypatch):
     monkeypatch.setenv("GCDT_ARTIFACTS", str(local_sweep[0] / "artifacts"))
-    broken = dataclasses.replace(TINY, tqc_budget={**TINY.tqc_budget, "gamma": 0.5})
+    # A config that cannot resolve is refused before any run: the run keys hash its values.
+    with pytest.raises(GcdtError, match="gamma is not a budget or loop value"):
+        build_grid(dataclasses.replace(TINY, tqc_budget={**TINY.tqc_budget, "gamma": 0.5}))
+    broken = dataclasses.replace(TINY, tqc_eval_every=0)  # refused by TQC+HER's training only
     summary = sweep(broken, store_root=tmp_path, workers=2, progress=False)
     assert not summary.ok and len(summary.failed) == 1 and len(summary.done) == 12
     failed = json.loads((tmp_path / f"{summary.failed[0]}.json").read_text())
     assert failed["status"] == "failed" and failed["spec"]["method"] == "tqc"
-    assert "gamma is not a budget or loop value" in failed["error"]
+    assert "eval_every must be an integer >= 1, got 0" in failed["error"]
     assert "Traceback" in failed["traceback"]
     retry = sweep(broken, store_root=tmp_path, workers=2, progress=False)
     assert retry.failed == summary.failed and len(retry.skipped) == 12  # failed runs re-run
@@ -456,14 +528,15 @@ def test_the_paper_profiles_path_runs_end_to_end_in_miniature(tmp_path, monkeypa
         for r in map(json.loads, map(Path.read_text, (tmp_path / "runs").glob("*.json")))
     }
     assert set(results) == {"gcdt", "bc", "tqc"}
-    # The expert data came from a TQC+HER agent the grid trained first (the other agent is
-    # Table 1's baseline).
+    # The expert data came from a TQC+HER agent the grid trained first. Here it is Table 1's
+    # baseline too: the same task, reward, seed and resolved config (steps 150 by the budget
+    # and by the data's size) make the same key, so one agent is trained, once.
     agents = {str(p) for p in (tmp_path / "artifacts" / "grid" / "tqc").glob("*/model.zip")}
     collections = [
         load_dataset(p) for p in (tmp_path / "artifacts" / "grid" / "datasets").glob("*.npz")
     ]
     (data,) = [d for d in collections if d.metadata["policy"]["name"] == "tqc"]
-    assert len(agents) == 2 and data.metadata["policy"]["path"] in agents and len(data) >= 150
+    assert len(agents) == 1 and data.metadata["policy"]["path"] in agents and len(data) >= 150
     # The epoch budget: GC-DT 120 epochs of ceil(episodes / 64) steps, BC 120 over transitions.
     gcdt_run, bc_run, tqc_run = results["gcdt"], results["bc"], results["tqc"]
     assert gcdt_run["spec"]["train_steps"] is None

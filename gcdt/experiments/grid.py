@@ -1,9 +1,12 @@
 """The experiment grid as data: every run of Table 1, RQ4, RQ5 and the ablations.
 
 A run is a frozen `RunSpec`: method, task, reward, seed, the data it learns from, its training
-and evaluation settings. Its key is a hash of all of that plus `RUN_SCHEMA`, so a run that
-appears in two sections (Table 1's GC-DT is also RQ4's largest subset and RQ5's 100 % point)
-is one run, and a result file can be matched to exactly the config that produced it.
+and evaluation settings. Its key is a hash of everything the run computes from, resolved: the
+whole `TrainConfig` the trainer gets (defaults and model shape included), the TQC+HER config's
+values (not its name), the data with its expert's resolved config, the evaluation settings, and
+`RUN_SCHEMA`. So a changed default re-runs exactly the runs it reaches, a run that appears in
+two sections (Table 1's GC-DT is also RQ4's largest subset and RQ5's 100 % point) is one run,
+and a result file can be matched to exactly the config that produced it.
 """
 
 from __future__ import annotations
@@ -14,13 +17,18 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from gcdt.baselines.tqc_her import TQCConfig, load_tqc_config
 from gcdt.errors import GcdtError
 from gcdt.experiments.profiles import EVAL_SEED_STEP, Profile, target_seeds
 from gcdt.paths import REPO_ROOT
 
-#: Bump when the meaning of a spec field or of a result file changes: old results re-run.
+if TYPE_CHECKING:
+    from gcdt.training import TrainConfig
+
+#: Bump when the meaning of a spec field or of a result file changes: old results re-run. A
+#: changed value (a default, a tqc_her.yaml entry) needs no bump: the keys hash the values.
 #: 3: data specs name the scripted experts' action noise. 4: TQC+HER's configs run SBX's TQC
 #: on 8 envs (tqc_her.yaml's loop values); episode seeds come from one stream per purpose;
 #: BC's budget follows `Profile.bc_budget`. 5: faster scripted experts (shorter episodes).
@@ -28,6 +36,8 @@ RUN_SCHEMA = 5
 SECTIONS = ("table1", "rq4", "rq5", "ablation", "targets", "generalisation")
 #: The goal-generalisation study's methods: both learn from the same region's expert data.
 GENERALISATION_METHODS = ("gcdt", "bc")
+#: The RunSpec fields of evaluation: runs that differ only in them share what they train.
+EVALUATION_FIELDS = ("eval_timesteps", "eval_seeds", "eval_envs", "target_return", "eval_region")
 #: Method name -> (trainer method, goal conditioning); `tqc` is the online baseline.
 OFFLINE_METHODS = {
     "gcdt": ("dt", "desired+achieved"),
@@ -46,7 +56,7 @@ def content_key(payload: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TQCSpec:
     """A TQC+HER training run (the baseline, or the agent that collects expert data)."""
 
@@ -59,11 +69,31 @@ class TQCSpec:
     eval_every: int | None  # learning-curve points (they also pick best_model.zip)
     eval_episodes: int
 
+    def tqc_config(self) -> TQCConfig:
+        """The config the agent trains with: the named one, with the budget and steps."""
+        changes = dict(self.budget)
+        if self.steps is not None:
+            changes["steps"] = self.steps
+        return load_tqc_config(self.config, self.task).with_budget(**changes)
+
+    def resolved(self) -> dict[str, Any]:
+        """What the agent computes from: the config's values stand for its name, budget and
+        steps (the name and what it overrides in `paper` are labels, not inputs)."""
+        config = self.tqc_config().to_dict()
+        for label in ("name", "overrides"):
+            del config[label]
+        own = {k: v for k, v in dataclasses.asdict(self).items() if k not in _TQC_CONFIG_FIELDS}
+        return {**own, "config": config}
+
     def key(self) -> str:
-        return content_key({"tqc": dataclasses.asdict(self), "schema": RUN_SCHEMA})
+        return content_key({"tqc": self.resolved(), "schema": RUN_SCHEMA})
 
 
-@dataclass(frozen=True)
+#: TQCSpec fields that only pick the config, which `TQCSpec.resolved` holds by value.
+_TQC_CONFIG_FIELDS = ("config", "steps", "budget")
+
+
+@dataclass(frozen=True, kw_only=True)
 class DataSpec:
     """An offline dataset: expert and random collections of `base_size` transitions, then the
     whole expert data (`size == base_size`, ratio 1), an expert subset (RQ4) or a mixture (RQ5).
@@ -86,8 +116,13 @@ class DataSpec:
     #: from; None: the task's whole goal range.
     goal_region: str | None = None
 
+    def resolved(self) -> dict[str, Any]:
+        """What the data is made from: the spec, with its TQC+HER expert resolved."""
+        expert = None if self.expert_tqc is None else self.expert_tqc.resolved()
+        return {**dataclasses.asdict(self), "expert_tqc": expert}
+
     def key(self) -> str:
-        return content_key({"data": dataclasses.asdict(self), "schema": RUN_SCHEMA})
+        return content_key({"data": self.resolved(), "schema": RUN_SCHEMA})
 
     @property
     def is_base(self) -> bool:
@@ -115,7 +150,7 @@ class DataSpec:
         return dataclasses.replace(self, size=self.base_size, expert_ratio=1.0)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RunSpec:
     """One run: train (or, for `tqc`, learn online) and evaluate one agent."""
 
@@ -134,15 +169,41 @@ class RunSpec:
     target_return: float = 0.0  # a DT's return-to-go at each evaluation episode's start
     eval_region: str | None = None  # the goal region evaluated in (None: the whole range)
 
+    def train_config(self) -> TrainConfig:
+        """The config offline training runs with (`artifacts.checkpoint`), every other field
+        at `TrainConfig`'s default."""
+        from gcdt.training import TrainConfig  # torch: not for `gcdt --help`
+
+        if self.method not in OFFLINE_METHODS:
+            raise GcdtError(f"{self.method} is not an offline method: it has no TrainConfig")
+        method, conditioning = OFFLINE_METHODS[self.method]
+        return TrainConfig(
+            method=method,
+            goal_conditioning=conditioning,
+            reward=self.reward,
+            steps=self.train_steps,
+            lr=self.learning_rate,
+            seed=self.seed,
+        )
+
+    def resolved(self) -> dict[str, Any]:
+        """Everything the run computes from, as its key hashes it: the spec, with the data,
+        the TQC+HER config and the training config (every field, the model's whole shape)
+        resolved to their values."""
+        out = {k: v for k, v in self.to_dict().items() if k not in _TRAIN_CONFIG_FIELDS}
+        out["data"] = None if self.data is None else self.data.resolved()
+        out["tqc"] = None if self.tqc is None else self.tqc.resolved()
+        out["train"] = None if self.method == "tqc" else _trainer_inputs(self.train_config())
+        return out
+
     def key(self) -> str:
-        return content_key({"run": self.to_dict(), "schema": RUN_SCHEMA})
+        return content_key({"run": self.resolved(), "schema": RUN_SCHEMA})
 
     def training_key(self) -> str:
         """The key of what the run trains: runs that differ only in how they are evaluated
         (the return-target study's targets, the generalisation study's regions) share one
         checkpoint."""
-        evaluation = ("eval_timesteps", "eval_seeds", "eval_envs", "target_return", "eval_region")
-        trained = {k: v for k, v in self.to_dict().items() if k not in evaluation}
+        trained = {k: v for k, v in self.resolved().items() if k not in EVALUATION_FIELDS}
         return content_key({"training": trained, "schema": RUN_SCHEMA})
 
     def to_dict(self) -> dict[str, Any]:
@@ -185,6 +246,21 @@ class RunSpec:
         return where
 
 
+#: RunSpec fields that set the training config, which `RunSpec.resolved` holds by value.
+_TRAIN_CONFIG_FIELDS = ("train_steps", "learning_rate")
+
+
+def _trainer_inputs(cfg: TrainConfig) -> dict[str, Any]:
+    """Every field of `cfg` but when checkpoints are written, and the model's whole shape
+    (`max_episode_steps` too, which no TrainConfig field sets)."""
+    from gcdt.training import SCHEDULING_FIELDS
+
+    out = {k: v for k, v in dataclasses.asdict(cfg).items() if k not in SCHEDULING_FIELDS}
+    shape = cfg.model_config(state_dim=0, action_dim=0)  # the dims follow from task and data
+    out["model"] = {k: v for k, v in shape.items() if k not in ("state_dim", "action_dim")}
+    return out
+
+
 @dataclass(frozen=True)
 class GridEntry:
     """A run and the sections (and the x-value within each) that use it."""
@@ -202,14 +278,14 @@ def _budget(profile: Profile) -> tuple[tuple[str, Any], ...]:
 def expert_tqc_spec(profile: Profile, task: str) -> TQCSpec:
     """The TQC+HER agent that collects `task`'s expert data: sparse rewards, the config's steps."""
     return TQCSpec(
-        task,
-        "sparse",
-        profile.tqc_config,
-        None,
-        _budget(profile),
-        profile.data_seed,
-        profile.tqc_eval_every,
-        profile.tqc_eval_episodes,
+        task=task,
+        reward="sparse",
+        config=profile.tqc_config,
+        steps=None,
+        budget=_budget(profile),
+        seed=profile.data_seed,
+        eval_every=profile.tqc_eval_every,
+        eval_episodes=profile.tqc_eval_episodes,
     )
 
 
@@ -222,18 +298,18 @@ def data_spec(
         digest = file_digest(REPO_ROOT / profile.expert_agents[task])
     expert_tqc = expert_tqc_spec(profile, task) if expert == "tqc" else None
     return DataSpec(
-        task,
-        int(size),
-        float(expert_ratio),
-        expert,
-        expert_tqc,
-        noise,
-        profile.expert_labels if noise else "executed",
-        profile.dataset_size,
-        profile.data_seed,
-        profile.collect_envs,
-        digest,
-        goal_region,
+        task=task,
+        size=int(size),
+        expert_ratio=float(expert_ratio),
+        expert=expert,
+        expert_tqc=expert_tqc,
+        expert_noise=noise,
+        expert_labels=profile.expert_labels if noise else "executed",
+        base_size=profile.dataset_size,
+        seed=profile.data_seed,
+        collect_envs=profile.collect_envs,
+        expert_digest=digest,
+        goal_region=goal_region,
     )
 
 
@@ -277,14 +353,14 @@ def run_spec(
     if method == "tqc":
         steps = profile.tqc_steps if profile.tqc_steps is not None else profile.dataset_size
         tqc = TQCSpec(
-            task,
-            reward,
-            profile.tqc_config,
-            steps,
-            _budget(profile),
-            seed,
-            profile.tqc_eval_every,
-            profile.tqc_eval_episodes,
+            task=task,
+            reward=reward,
+            config=profile.tqc_config,
+            steps=steps,
+            budget=_budget(profile),
+            seed=seed,
+            eval_every=profile.tqc_eval_every,
+            eval_episodes=profile.tqc_eval_episodes,
         )
     train_steps = None  # TQC+HER: online; the DTs: the profile's steps, or the paper's epochs
     if method == "bc":
@@ -295,20 +371,20 @@ def run_spec(
     if eval_seeds is None:
         eval_seeds = tuple(seed + EVAL_SEED_STEP * i for i in range(profile.eval_seeds))
     return RunSpec(
-        method,
-        task,
-        reward,
-        seed,
-        data,
-        train_steps,
-        learning_rate,
-        tqc,
-        profile.eval_timesteps,
-        eval_seeds,
-        profile.eval_envs,
-        profile.cpus_per_run,
-        float(target_return),
-        eval_region,
+        method=method,
+        task=task,
+        reward=reward,
+        seed=seed,
+        data=data,
+        train_steps=train_steps,
+        learning_rate=learning_rate,
+        tqc=tqc,
+        eval_timesteps=profile.eval_timesteps,
+        eval_seeds=eval_seeds,
+        eval_envs=profile.eval_envs,
+        threads=profile.cpus_per_run,
+        target_return=float(target_return),
+        eval_region=eval_region,
     )
 
 

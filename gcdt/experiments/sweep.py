@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gcdt.baselines.tqc_her import RUN_JSON, load_tqc_config
+from gcdt.baselines.tqc_her import RUN_JSON
 from gcdt.errors import GcdtError
 from gcdt.experiments.costs import CostModel
 from gcdt.experiments.grid import GridEntry, build_grid
@@ -124,9 +124,11 @@ def shared_cost(todo: list[PlannedRun], costs: CostModel | None = None) -> float
         for k, b in bases.items()
         if not (grid_dir() / "datasets" / f"{k}.npz").exists()
     )
+    # An expert with a TQC+HER run's values is that run's agent, whose estimate counts it.
+    runs = {p.entry.spec.tqc.key() for p in todo if p.entry.spec.tqc is not None}
     for key, spec in experts.items():
-        if not (grid_dir() / "tqc" / key / RUN_JSON).exists():
-            steps = spec.steps or load_tqc_config(spec.config, spec.task).steps
+        if key not in runs and not (grid_dir() / "tqc" / key / RUN_JSON).exists():
+            steps = spec.tqc_config().steps
             seconds += steps * costs.rates.get(f"tqc_step:{spec.config}", 1.0)
     return seconds
 

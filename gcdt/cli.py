@@ -622,6 +622,18 @@ def _tqc_parser(sub: argparse._SubParsersAction) -> None:
     tt.add_argument("--eval-episodes", type=_positive_int, default=20, metavar="N")
     tt.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
     tt.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    tt.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the run in --out from its checkpoint (same command otherwise)",
+    )
+    tt.add_argument(
+        "--checkpoint-seconds",
+        type=float,
+        default=120.0,
+        metavar="S",
+        help="seconds between checkpoints (default 120; 0: every loop iteration)",
+    )
     tt.set_defaults(run=_tqc_train)
 
 
@@ -644,6 +656,8 @@ def _tqc_train(args: argparse.Namespace) -> int:
         stop_at=args.stop_at,
         progress=not args.no_progress,
         command=_command(args),
+        resume=args.resume,
+        checkpoint_seconds=args.checkpoint_seconds,
     )
     final = result.final_success_rate
     print(

@@ -24,7 +24,7 @@ import os
 import sys
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
@@ -246,12 +246,37 @@ class SeededResets(gym.Wrapper):
         super().__init__(env)
         self.base_seed, self.episodes, self.stream = int(seed), 0, stream
         self.offset, self.stride = int(offset), int(stride)
+        # The current episode's actions and last observation: enough to rebuild it.
+        self.actions: list[np.ndarray] = []
+        self.last_obs: Any = None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         index = self.offset + self.episodes * self.stride
         seed = episode_seed(self.base_seed, index, self.stream)
         self.episodes += 1
-        return self.env.reset(seed=seed, options=options)
+        self.actions = []
+        self.last_obs, info = self.env.reset(seed=seed, options=options)
+        return self.last_obs, info
+
+    def step(self, action):
+        self.actions.append(np.array(action, copy=True))
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.last_obs = obs
+        return obs, reward, terminated, truncated, info
+
+    def replay_state(self) -> dict[str, Any]:
+        """Where this env is: its episode count and the current episode's actions."""
+        return {"episodes": self.episodes, "actions": np.array(self.actions)}
+
+    def restore_replay_state(self, state: dict[str, Any]) -> None:
+        """Bring a fresh env to `replay_state()`'s point: reset with that episode's seed and
+        replay its actions (the physics is deterministic, so the state is the same)."""
+        if state["episodes"] == 0:
+            return
+        self.episodes = state["episodes"] - 1
+        self.reset()
+        for action in state["actions"]:
+            self.step(action)
 
 
 #: The keys of a panda-gym observation dict, in the paper's state order.

@@ -380,3 +380,124 @@ def test_sbx_backend_critic_update_is_sbx_s_own():
         moved = max(moved, float(jnp.abs(new - old).max()))
     model.get_env().close()
     assert moved > 1e-4  # the update did change the critics
+
+
+# --------------------------------------------------------------------------------------------
+# Checkpoints and resume
+
+
+def _reach_argv(out, *extra):
+    return [
+        "tqc", "train", "--task", "reach", "--reward", "sparse", "--config", "cpu",
+        "--steps", "1600", "--eval-every", "800", "--eval-episodes", "2", "--n-envs", "2",
+        "--out", str(out), "--no-progress", "--checkpoint-seconds", "0", *extra,
+    ]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def checkpointed(tmp_path_factory):
+    """A run SIGKILLed mid-learning, its checkpoint on disk."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE, read_header
+
+    out = tmp_path_factory.mktemp("ckpt") / "run"
+    argv = [sys.executable, "-m", "gcdt", *_reach_argv(out)]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    ckpt = out / CHECKPOINT_FILE
+    deadline = time.monotonic() + 600
+    while time.monotonic() < deadline and proc.poll() is None:
+        if ckpt.exists() and read_header(ckpt)["env_steps"] > 1100:  # learning has begun
+            break
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.stderr.read().decode()
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    return out
+
+
+def test_a_killed_run_resumes_and_finishes_as_one_run(checkpointed, tmp_path):
+    """`--resume` after SIGKILL: the run ends with the full budget, one curve point per
+    evaluation mark, and no checkpoint left behind."""
+    from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE, read_header
+
+    out = tmp_path / "run"
+    shutil.copytree(checkpointed, out)
+    assert 1000 < read_header(out / CHECKPOINT_FILE)["env_steps"] < 1600
+    assert main(_reach_argv(out, "--resume")) == 0
+    record = json.loads((out / "run.json").read_text())
+    assert record["env_steps"] == 1600 and record["resumes"] == 1
+    assert "--resume" not in record["command"]  # the command that started the run
+    with open(out / "eval.csv", newline="") as f:
+        assert [int(r["env_steps"]) for r in csv.DictReader(f)] == [800, 1600]
+    assert not (out / CHECKPOINT_FILE).exists()
+
+
+def test_resume_without_a_checkpoint_is_one_line_exit_2(assert_usage_error, tmp_path):
+    argv = ["tqc", "train", "--task", "reach", "--reward", "sparse", "--out", str(tmp_path)]
+    assert_usage_error([*argv, "--resume"], "no TQC+HER checkpoint at")
+    assert list(tmp_path.iterdir()) == []
+
+
+def _unchanged(out):
+    return {p.name: (p.stat().st_mtime_ns, p.stat().st_size) for p in out.iterdir()}
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--task", "push"], "a checkpoint of task 'reach', not 'push'"),
+        (["--reward", "dense"], "a checkpoint of reward 'sparse', not 'dense'"),
+        (["--config", "paper"], "a checkpoint of config"),
+        (["--backend", "sb3"], "a checkpoint of backend 'sbx', not 'sb3'"),
+    ],
+)
+def test_a_checkpoint_of_another_run_is_refused(assert_usage_error, checkpointed, extra, message):
+    base = {"--task": "reach", "--reward": "sparse"}
+    base.update(dict(zip(extra[::2], extra[1::2], strict=True)))
+    argv = ["tqc", "train", *[x for kv in base.items() for x in kv], "--out", str(checkpointed)]
+    before = _unchanged(checkpointed)
+    assert_usage_error([*argv, "--resume"], message)
+    assert _unchanged(checkpointed) == before
+
+
+def test_a_truncated_checkpoint_is_refused(assert_usage_error, checkpointed, tmp_path):
+    from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE
+
+    out = tmp_path / "run"
+    shutil.copytree(checkpointed, out)
+    data = (out / CHECKPOINT_FILE).read_bytes()
+    (out / CHECKPOINT_FILE).write_bytes(data[: len(data) // 2])
+    before = _unchanged(out)
+    argv = ["tqc", "train", "--task", "reach", "--reward", "sparse", "--out", str(out)]
+    assert_usage_error([*argv, "--resume"], "is truncated or not a TQC+HER checkpoint")
+    assert _unchanged(out) == before
+
+
+def test_a_folder_with_a_checkpoint_is_not_started_over(assert_usage_error, checkpointed):
+    argv = ["tqc", "train", "--task", "reach", "--reward", "sparse", "--out", str(checkpointed)]
+    before = _unchanged(checkpointed)
+    assert_usage_error(argv, "resume it with --resume")
+    assert _unchanged(checkpointed) == before
+
+
+def test_an_env_restored_by_replay_starts_its_episode_exactly():
+    """The reset state is rebuilt bit for bit; later steps drift by PyBullet's IK state (see
+    `gcdt/baselines/tqc_checkpoint.py`), which the resume test tolerates."""
+    from gcdt.envs import SeededResets
+
+    a = SeededResets(make_env("push", "sparse"), 0)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        a.reset()
+        for _ in range(5):
+            a.step(rng.uniform(-1, 1, a.action_space.shape).astype(np.float32))
+    a.reset()
+    b = SeededResets(make_env("push", "sparse"), 0)
+    b.restore_replay_state(a.replay_state())
+    assert b.episodes == a.episodes
+    assert all(np.array_equal(a.last_obs[k], b.last_obs[k]) for k in a.last_obs)

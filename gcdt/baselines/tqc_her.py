@@ -14,7 +14,11 @@ measures the current policy every `eval_every` env steps (success rate and retur
 the task, reward, config and backend they were trained with, and `run.json` records the
 wall-clock time and env steps/s.
 
-Output folder: `model.zip` (last), `best_model.zip`, `eval.csv`, `run.json`.
+A run checkpoints itself every `checkpoint_seconds` (`tqc_checkpoint.py`); `resume=True`
+carries on from the last checkpoint and ends as the uninterrupted run would have.
+
+Output folder: `model.zip` (last), `best_model.zip`, `eval.csv`, `run.json`, and while the run
+is in progress `checkpoint.tqc`.
 """
 
 from __future__ import annotations
@@ -29,6 +33,13 @@ from typing import Any
 import numpy as np
 import yaml
 
+from gcdt.baselines.tqc_checkpoint import (
+    CHECKPOINT_FILE,
+    check_identity,
+    load_checkpoint,
+    read_header,
+    save_checkpoint,
+)
 from gcdt.envs import check_reward, get_task
 from gcdt.errors import GcdtError
 from gcdt.paths import atomic_write, write_json_atomic
@@ -56,6 +67,8 @@ EVAL_FIELDS = (
 )
 #: Evaluation episodes during training use seeds apart from those of `gcdt evaluate --seed 0`.
 EVAL_SEED_OFFSET = 1000
+#: Seconds between checkpoints: a resume repeats at most this much work.
+CHECKPOINT_SECONDS = 120.0
 
 
 @dataclass(frozen=True)
@@ -200,12 +213,17 @@ def train_tqc(
     stop_at: float | None = None,
     progress: bool = True,
     command: str | None = None,
+    resume: bool = False,
+    checkpoint_seconds: float = CHECKPOINT_SECONDS,
 ) -> TQCResult:
     """Train TQC+HER on `task` with `reward`; write the run's files to `out_dir`.
 
     The current policy is evaluated with `gcdt.evaluation.evaluate` on `eval_episodes`
     episodes every `eval_every` env steps (default: 10 times per run) and once at the end;
     with `stop_at`, training ends at the first evaluation whose success rate reaches it.
+    A checkpoint is written every `checkpoint_seconds` (0: every loop iteration); with
+    `resume`, the run in `out_dir` continues from its checkpoint, which must be of the same
+    task, reward, seed, config and evaluation.
     """
     spec = get_task(task)
     check_reward(reward)
@@ -218,10 +236,29 @@ def train_tqc(
         raise GcdtError(f"seed must be a non-negative integer, got {seed!r}")
     if stop_at is not None and not 0 < stop_at <= 1:
         raise GcdtError(f"stop_at is a success rate in (0, 1], got {stop_at!r}")
+    if not (isinstance(checkpoint_seconds, int | float) and checkpoint_seconds >= 0):
+        raise GcdtError(f"checkpoint_seconds must be >= 0, got {checkpoint_seconds!r}")
     out = Path(out_dir)
-    taken = [name for name in RUN_FILES if (out / name).exists()]
-    if taken:
-        raise GcdtError(f"{out} already holds a TQC+HER run ({taken[0]}); choose another --out")
+    identity = {
+        "task": spec.name,
+        "reward": reward,
+        "seed": seed,
+        "backend": cfg.backend,
+        "config": cfg.to_dict(),
+        "evaluation": {"every": eval_every, "episodes": eval_episodes, "stop_at": stop_at},
+    }
+    ckpt_path = out / CHECKPOINT_FILE
+    if (out / RUN_JSON).exists():
+        raise GcdtError(f"{out} already holds a finished TQC+HER run; choose another --out")
+    if resume:
+        check_identity(ckpt_path, read_header(ckpt_path), identity)  # a one-line error if not
+    else:
+        taken = [name for name in (*RUN_FILES, CHECKPOINT_FILE) if (out / name).exists()]
+        if taken:
+            raise GcdtError(
+                f"{out} already holds a TQC+HER run ({taken[0]}); resume it with --resume, "
+                "or choose another --out"
+            )
 
     commit = git_commit()  # the code the run starts with, not what the tree holds at its end
     model = build_tqc(cfg, spec.name, reward, seed, device)  # refuses a bad loop, writes nothing
@@ -237,13 +274,41 @@ def train_tqc(
     evaluator = _PeriodicEvaluation(
         model, out, spec.name, reward, eval_every, eval_episodes, seed + EVAL_SEED_OFFSET, stop_at
     )
-    started = time.perf_counter()
-    model.learn(cfg.steps, callback=evaluator.callback(cfg.steps, cfg.learning_starts, progress))
+    clock = _RunClock()
+    resumes = 0
+    if resume:
+        saved = load_checkpoint(ckpt_path, model)
+        model.gcdt = saved["gcdt"]
+        evaluator.set_state(saved["evaluation"])
+        clock.set_state(saved["clock"])
+        resumes = saved["resumes"] + 1
+        commit, command = saved["git_commit"], saved["command"]  # as the run started
+
+    def checkpoint() -> int:
+        extra = {
+            "gcdt": model.gcdt,
+            "evaluation": evaluator.state(),
+            "clock": clock.state(),
+            "resumes": resumes,
+            "git_commit": commit,
+            "command": command,
+        }
+        return save_checkpoint(ckpt_path, model, identity, extra)
+
+    if model.num_timesteps < cfg.steps and not (resume and evaluator.reached_target()):
+        model.learn(
+            cfg.steps - model.num_timesteps,
+            callback=[
+                evaluator.callback(cfg.steps, cfg.learning_starts, progress),
+                _checkpoint_callback(checkpoint, checkpoint_seconds),
+            ],
+            reset_num_timesteps=not resume,
+        )
     # model.learn stops at the first multiple of n_envs >= steps, or at `stop_at`.
     learning_rate = evaluator.learning_rate()
     if evaluator.last_step != model.num_timesteps:
         evaluator.run()  # the final policy is always measured
-    wall = time.perf_counter() - started
+    wall = clock.wall()
     _save_zip(model, out / MODEL_ZIP)
     model.get_env().close()
     train_seconds = wall - evaluator.seconds
@@ -277,6 +342,9 @@ def train_tqc(
             "wall_seconds": round(wall, 2),
             "env_steps_per_second": round(result.env_steps_per_second, 2),
             "learning_steps_per_second": learning_rate and round(learning_rate, 2),
+            # CPU time of every thread over the kept work (a resume's repeated part excluded)
+            "core_hours": round(clock.cpu_seconds() / 3600, 3),
+            "resumes": resumes,
             "best": evaluator.best_row,
             "final": evaluator.rows[-1] if evaluator.rows else None,
             "command": command,
@@ -285,7 +353,49 @@ def train_tqc(
             "versions": package_versions((*TRACKED_PACKAGES, *TQC_PACKAGES[cfg.backend])),
         },
     )
+    ckpt_path.unlink(missing_ok=True)  # the run is finished: run.json is its record
     return result
+
+
+class _RunClock:
+    """Wall-clock and CPU seconds of a run, carried across resumes."""
+
+    def __init__(self) -> None:
+        self.wall_start, self.cpu_start = time.perf_counter(), time.process_time()
+
+    def wall(self) -> float:
+        return time.perf_counter() - self.wall_start
+
+    def cpu_seconds(self) -> float:
+        return time.process_time() - self.cpu_start
+
+    def state(self) -> dict[str, float]:
+        return {"wall": self.wall(), "cpu": self.cpu_seconds()}
+
+    def set_state(self, state: dict[str, float]) -> None:
+        self.wall_start = time.perf_counter() - state["wall"]
+        self.cpu_start = time.process_time() - state["cpu"]
+
+
+def _checkpoint_callback(save: Any, every_seconds: float) -> Any:
+    """Calls `save()` between loop iterations, at most every `every_seconds`."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _Checkpoint(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.last = (self.num_timesteps, time.perf_counter())
+
+        def _on_rollout_start(self) -> None:
+            # Between iterations: the last transitions are stored and trained on.
+            step, clock = self.last
+            if self.model.num_timesteps > step and time.perf_counter() - clock >= every_seconds:
+                save()
+                self.last = (self.model.num_timesteps, time.perf_counter())
+
+        def _on_step(self) -> bool:
+            return True
+
+    return _Checkpoint()
 
 
 #: The packages a backend's runs record the versions of.
@@ -447,7 +557,39 @@ class _PeriodicEvaluation:
         self.seconds += time.perf_counter() - began
 
     def reached_target(self) -> bool:
-        return self.stop_at is not None and self.rows[-1]["success_rate"] >= self.stop_at
+        return (
+            self.stop_at is not None
+            and bool(self.rows)
+            and self.rows[-1]["success_rate"] >= self.stop_at
+        )
+
+    def state(self) -> dict[str, Any]:
+        """What a checkpoint keeps: the curve so far, the best point, the time spent."""
+        now = time.perf_counter()
+        mark = self.learning_mark
+        return {
+            "rows": self.rows,
+            "best": self.best,
+            "best_row": self.best_row,
+            "evaluations": self.evaluations,
+            "seconds": self.seconds,
+            "last_step": self.last_step,
+            "elapsed": now - self.started,
+            "learning_mark": None if mark is None else (mark[0], now - mark[1], mark[2]),
+        }
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Continue from `state()`; eval.csv is rewritten to hold exactly the saved curve."""
+        now = time.perf_counter()
+        self.rows, self.best, self.best_row = state["rows"], state["best"], state["best_row"]
+        self.evaluations, self.seconds = state["evaluations"], state["seconds"]
+        self.last_step, self.started = state["last_step"], now - state["elapsed"]
+        mark = state["learning_mark"]
+        self.learning_mark = None if mark is None else (mark[0], now - mark[1], mark[2])
+        with atomic_write(self.out / EVAL_CSV) as f:
+            writer = csv.DictWriter(f, EVAL_FIELDS)
+            writer.writeheader()
+            writer.writerows(self.rows)
 
     def mark_learning_start(self) -> None:
         self.learning_mark = (self.model.num_timesteps, time.perf_counter(), self.seconds)
@@ -470,6 +612,7 @@ class _PeriodicEvaluation:
         class _Callback(BaseCallback):
             def _on_training_start(self) -> None:
                 self.bar = progress_bar(total=total, desc="TQC+HER", unit="step", progress=progress)
+                self.bar.update(self.num_timesteps)  # a resumed run's steps so far
 
             def _on_step(self) -> bool:
                 self.bar.update(self.training_env.num_envs)

@@ -20,17 +20,17 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE
 from gcdt.baselines.tqc_her import (
     EVAL_CSV,
     MODEL_ZIP,
     RUN_FILES,
     RUN_JSON,
-    load_tqc_config,
     train_tqc,
 )
 from gcdt.data import Dataset, collect, load_dataset, mix, subset
 from gcdt.errors import GcdtError
-from gcdt.experiments.grid import OFFLINE_METHODS, DataSpec, RunSpec, TQCSpec, file_digest
+from gcdt.experiments.grid import DataSpec, RunSpec, TQCSpec, file_digest
 from gcdt.paths import REPO_ROOT, artifacts_dir
 from gcdt.regions import GoalRegion
 
@@ -61,22 +61,20 @@ def tqc_agent(spec: TQCSpec) -> Path:
     model = out / MODEL_ZIP
     with _locked(spec.key()):
         if not (out / RUN_JSON).exists():  # written last: without it the run did not finish
-            for name in RUN_FILES:  # what an interrupted run left
-                (out / name).unlink(missing_ok=True)
-            cfg = load_tqc_config(spec.config, spec.task)
-            changes = dict(spec.budget)
-            if spec.steps is not None:
-                changes["steps"] = spec.steps
-            cfg = cfg.with_budget(**changes)
+            resume = (out / CHECKPOINT_FILE).exists()  # an interrupted run carries on from it
+            if not resume:
+                for name in RUN_FILES:  # what a run interrupted before its first checkpoint left
+                    (out / name).unlink(missing_ok=True)
             train_tqc(
                 spec.task,
                 spec.reward,
-                cfg,
+                spec.tqc_config(),
                 out,
                 seed=spec.seed,
                 eval_every=spec.eval_every,
                 eval_episodes=spec.eval_episodes,
                 progress=False,
+                resume=resume,
             )
     return model
 
@@ -153,21 +151,13 @@ def checkpoint(spec: RunSpec) -> Path:
     """The finished training checkpoint of offline run `spec`: trained first if it does not
     exist yet, resumed if an earlier training was interrupted."""
     from gcdt.checkpoint import CHECKPOINT_NAME, load_checkpoint
-    from gcdt.training import TrainConfig, train
+    from gcdt.training import train
 
     out = checkpoint_dir(spec)
     path = out / CHECKPOINT_NAME
     with _locked(spec.training_key()):
         ckpt = load_checkpoint(path) if path.exists() else None
         if ckpt is None or not ckpt["complete"]:
-            method, conditioning = OFFLINE_METHODS[spec.method]
-            cfg = TrainConfig(
-                method=method,
-                goal_conditioning=conditioning,
-                reward=spec.reward,
-                steps=spec.train_steps,
-                lr=spec.learning_rate,
-                seed=spec.seed,
-            )
+            cfg = spec.train_config()  # the config the run's key hashes
             train(dataset(spec.data), cfg, out, resume=ckpt is not None, progress=False)
     return path

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Issue 42's long TQC+HER runs (1M env steps, cpu config, sbx loop, seed 0), one after the
+# other, each started or resumed from its checkpoint: re-run this script after any stop.
+# Usage: nohup scripts/long_tqc_runs.sh > artifacts/long_tqc_runs.log 2>&1 &
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT="${GCDT_ARTIFACTS:-artifacts}/long_tqc"
+for run in pick_and_place:sparse push:sparse reach:sparse push:dense pick_and_place:dense; do
+  task="${run%%:*}" reward="${run##*:}" out="$ROOT/${task}_${reward}"
+  [ -f "$out/run.json" ] && continue  # finished
+  resume=()
+  [ -f "$out/checkpoint.tqc" ] && resume=(--resume)
+  .venv/bin/gcdt tqc train --task "$task" --reward "$reward" --config cpu --steps 1000000 \
+    --seed 0 --eval-every 25000 --eval-episodes 100 --out "$out" --no-progress "${resume[@]}"
+done

@@ -246,7 +246,7 @@ def test_train_refuses_a_folder_holding_a_run(assert_usage_error, push_run, tmp_
     shutil.copytree(push_run.out_dir, out)
     before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
     argv = ["tqc", "train", "--task", "push", "--reward", "sparse", "--out", str(out)]
-    assert_usage_error(argv, "already holds a TQC+HER run")
+    assert_usage_error(argv, "already holds a finished TQC+HER run")
     assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before
 
 

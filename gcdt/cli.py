@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from gcdt.baselines.tqc_her import BACKENDS as TQC_BACKENDS
-from gcdt.baselines.tqc_her import RUN_FILES, tqc_config_names
+from gcdt.baselines.tqc_her import CHECKPOINT_SECONDS, RUN_FILES, tqc_config_names
 from gcdt.data.collect import LABELS
 from gcdt.envs import REWARDS, TASKS
 from gcdt.errors import GcdtError
@@ -630,9 +630,10 @@ def _tqc_parser(sub: argparse._SubParsersAction) -> None:
     tt.add_argument(
         "--checkpoint-seconds",
         type=float,
-        default=120.0,
+        default=CHECKPOINT_SECONDS,
         metavar="S",
-        help="seconds between checkpoints (default 120; 0: every loop iteration)",
+        help=f"seconds between checkpoints (default {CHECKPOINT_SECONDS:g}; 0: every loop "
+        "iteration)",
     )
     tt.set_defaults(run=_tqc_train)
 

@@ -8,9 +8,11 @@ NumPy / Python / torch RNG states (HER samples with NumPy's), each env's place i
 episode stream, and what the caller adds (the learning curve so far).
 
 An env mid-episode is restored by resetting it with that episode's seed and replaying the
-episode's actions: panda-gym's PyBullet physics is deterministic, so it reaches the same
-state bit for bit (`tests/test_tqc.py` checks this), where PyBullet's own state files do not
-carry across processes.
+episode's actions. Its reset state is rebuilt bit for bit (`tests/test_tqc.py`), but the
+steps after it are not: panda-gym's end-effector control goes through PyBullet's inverse
+kinematics, which keeps state across calls that neither a reset nor PyBullet's own
+`saveState`/`restoreState` brings back. So the learner resumes exactly and the envs up to
+that drift (docs/library.md gives its size).
 
 The file: a magic line, the length of a JSON header, the header (what the run is, and the
 payload's length and SHA-256), then the pickled payload; written to a temp file, synced and
@@ -20,7 +22,6 @@ renamed, so a reader sees the old checkpoint or the new one, never half of one.
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import os
 import pickle
@@ -127,7 +128,7 @@ def _read(path: Path, payload: bool) -> tuple[dict[str, Any], Any]:
         blob = f.read()
     if hashlib.sha256(blob).hexdigest() != header["payload_sha256"]:
         raise truncated
-    return header, pickle.load(io.BytesIO(blob))
+    return header, pickle.loads(blob)
 
 
 # --------------------------------------------------------------------------------------------
@@ -159,10 +160,10 @@ def _trimmed(buffer: Any) -> Any:
             continue
         if isinstance(value, dict) and all(_is_slots(buffer, v) for v in value.values()):
             clone._slot_shapes[name] = {k: (v.shape, v.dtype) for k, v in value.items()}
-            setattr(clone, name, {k: v[:filled].copy() for k, v in value.items()})
+            setattr(clone, name, {k: v[:filled] for k, v in value.items()})
         elif _is_slots(buffer, value):
             clone._slot_shapes[name] = (value.shape, value.dtype)
-            setattr(clone, name, value[:filled].copy())
+            setattr(clone, name, value[:filled])  # a view: pickled without the rest
     if "env" in vars(clone):
         clone.env = None
     return clone

@@ -15,7 +15,8 @@ the task, reward, config and backend they were trained with, and `run.json` reco
 wall-clock time and env steps/s.
 
 A run checkpoints itself every `checkpoint_seconds` (`tqc_checkpoint.py`); `resume=True`
-carries on from the last checkpoint and ends as the uninterrupted run would have.
+carries on from the last checkpoint (the learner exactly, the envs up to PyBullet's IK state:
+see that module).
 
 Output folder: `model.zip` (last), `best_model.zip`, `eval.csv`, `run.json`, and while the run
 is in progress `checkpoint.tqc`.
@@ -271,16 +272,24 @@ def train_tqc(
         "seed": seed,
         "backend": cfg.backend,
     }
-    evaluator = _PeriodicEvaluation(
-        model, out, spec.name, reward, eval_every, eval_episodes, seed + EVAL_SEED_OFFSET, stop_at
-    )
     clock = _RunClock()
+    evaluator = _PeriodicEvaluation(
+        model,
+        out,
+        spec.name,
+        reward,
+        eval_every,
+        eval_episodes,
+        seed + EVAL_SEED_OFFSET,
+        clock,
+        stop_at,
+    )
     resumes = 0
     if resume:
         saved = load_checkpoint(ckpt_path, model)
         model.gcdt = saved["gcdt"]
-        evaluator.set_state(saved["evaluation"])
         clock.set_state(saved["clock"])
+        evaluator.set_state(saved["evaluation"])
         resumes = saved["resumes"] + 1
         commit, command = saved["git_commit"], saved["command"]  # as the run started
 
@@ -511,6 +520,7 @@ class _PeriodicEvaluation:
         every: int,
         episodes: int,
         seed: int,
+        clock: _RunClock,
         stop_at: float | None = None,
     ) -> None:
         self.model, self.out, self.task, self.reward = model, out, task, reward
@@ -522,8 +532,8 @@ class _PeriodicEvaluation:
         self.evaluations = 0  # periodic evaluations so far
         self.seconds = 0.0  # time spent evaluating, excluded from the training speed
         self.last_step = -1
-        self.started = time.perf_counter()
-        self.learning_mark: tuple[int, float, float] | None = None  # (step, clock, eval s)
+        self.clock = clock  # the run's, carried across resumes
+        self.learning_mark: tuple[int, float, float] | None = None  # (step, wall s, eval s)
         with open(out / EVAL_CSV, "w", newline="") as f:
             csv.writer(f).writerow(EVAL_FIELDS)
 
@@ -531,7 +541,7 @@ class _PeriodicEvaluation:
         from gcdt.evaluation import evaluate
         from gcdt.policies.tqc import TQCPolicy
 
-        began = time.perf_counter()
+        began = self.clock.wall()
         policy = TQCPolicy(self.model.policy, self.task, meta=self.model.gcdt)
         result = evaluate(
             policy, self.task, self.reward, episodes=self.episodes, seed=self.seed, progress=False
@@ -539,8 +549,8 @@ class _PeriodicEvaluation:
         summary = result.summary
         row = {
             "env_steps": int(self.model.num_timesteps),
-            "train_seconds": round(began - self.started - self.seconds, 2),
-            "wall_seconds": round(began - self.started, 2),
+            "train_seconds": round(began - self.seconds, 2),
+            "wall_seconds": round(began, 2),
             "success_rate": summary["success_rate"],
             "mean_return": summary["mean_return"],
             "episodes": summary["episodes"],
@@ -554,7 +564,7 @@ class _PeriodicEvaluation:
         if score > self.best:
             self.best, self.best_row = score, row
             _save_zip(self.model, self.out / BEST_MODEL_ZIP)
-        self.seconds += time.perf_counter() - began
+        self.seconds += self.clock.wall() - began
 
     def reached_target(self) -> bool:
         return (
@@ -565,8 +575,6 @@ class _PeriodicEvaluation:
 
     def state(self) -> dict[str, Any]:
         """What a checkpoint keeps: the curve so far, the best point, the time spent."""
-        now = time.perf_counter()
-        mark = self.learning_mark
         return {
             "rows": self.rows,
             "best": self.best,
@@ -574,32 +582,34 @@ class _PeriodicEvaluation:
             "evaluations": self.evaluations,
             "seconds": self.seconds,
             "last_step": self.last_step,
-            "elapsed": now - self.started,
-            "learning_mark": None if mark is None else (mark[0], now - mark[1], mark[2]),
+            "learning_mark": self.learning_mark,
         }
 
     def set_state(self, state: dict[str, Any]) -> None:
-        """Continue from `state()`; eval.csv is rewritten to hold exactly the saved curve."""
-        now = time.perf_counter()
+        """Continue from `state()` (the run's clock is restored beside it); eval.csv is
+        rewritten to hold exactly the saved curve."""
         self.rows, self.best, self.best_row = state["rows"], state["best"], state["best_row"]
         self.evaluations, self.seconds = state["evaluations"], state["seconds"]
-        self.last_step, self.started = state["last_step"], now - state["elapsed"]
-        mark = state["learning_mark"]
-        self.learning_mark = None if mark is None else (mark[0], now - mark[1], mark[2])
+        self.last_step, self.learning_mark = state["last_step"], state["learning_mark"]
+        if "elapsed" in state and self.learning_mark is not None:
+            # Checkpoints written before the evaluator read the run's clock kept the seconds
+            # since the mark; with the clock restored first, that is a wall time again.
+            step, since, eval_seconds = self.learning_mark
+            self.learning_mark = (step, self.clock.wall() - since, eval_seconds)
         with atomic_write(self.out / EVAL_CSV) as f:
             writer = csv.DictWriter(f, EVAL_FIELDS)
             writer.writeheader()
             writer.writerows(self.rows)
 
     def mark_learning_start(self) -> None:
-        self.learning_mark = (self.model.num_timesteps, time.perf_counter(), self.seconds)
+        self.learning_mark = (self.model.num_timesteps, self.clock.wall(), self.seconds)
 
     def learning_rate(self) -> float | None:
         """Env steps/s since `mark_learning_start`, evaluations excluded (None if unmarked)."""
         if self.learning_mark is None or self.model.num_timesteps <= self.learning_mark[0]:
             return None
-        step, clock, eval_seconds = self.learning_mark
-        seconds = time.perf_counter() - clock - (self.seconds - eval_seconds)
+        step, wall, eval_seconds = self.learning_mark
+        seconds = self.clock.wall() - wall - (self.seconds - eval_seconds)
         return (self.model.num_timesteps - step) / max(seconds, 1e-9)
 
     def callback(self, total: int, learning_starts: int, progress: bool) -> Any:

@@ -1,5 +1,8 @@
 """The `gcdt` command line (also `python -m gcdt`).
 
+Each command is a frozen dataclass: its fields are the command's options (`gcdt.settings`:
+type, default, help), its `__post_init__` validates them and its `run` does the work. A field
+that is a dataclass (`EvaluationConfig`, `TrainConfig`, ...) brings its own fields as options.
 Bad input, from argparse or from the library (`GcdtError`), ends with one line
 `gcdt: error: ...` on stderr and exit status 2, never a traceback.
 """
@@ -9,29 +12,40 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime as dt
+import inspect
 import json
 import sys
-import typing
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from gcdt.baselines.tqc_her import BACKENDS as TQC_BACKENDS
-from gcdt.baselines.tqc_her import CHECKPOINT_SECONDS, RUN_FILES, tqc_config_names
+from gcdt.baselines.tqc_her import TQCRunSettings, tqc_config_names
 from gcdt.data.collect import LABELS
-from gcdt.envs import REWARDS, TASKS
+from gcdt.envs import TASKS, RewardType
 from gcdt.errors import GcdtError
-from gcdt.evaluation import DEFAULT_TIMESTEPS, EvaluationConfig
+from gcdt.evaluation import EvaluationConfig
 from gcdt.experiments.grid import SECTIONS
 from gcdt.experiments.profiles import PROFILES
 from gcdt.experiments.sweep import BACKENDS
 from gcdt.paths import check_writable, write_json_atomic
 from gcdt.policies import POLICY_NAMES, POLICY_SPECS, TQC_PREFIX
+from gcdt.regions import GoalRegion
+from gcdt.settings import REQUIRED, add_options, check_minimums, from_options, setting
+
+if TYPE_CHECKING:
+    from gcdt.training import TrainConfig
 
 USAGE_ERROR = 2
-POLICY_HELP = (
-    "a policy name, tqc:PATH of a TQC+HER zip (gcdt tqc train), or the path of a GC-DT/DT/BC "
-    "checkpoint (gcdt train)"
+#: The commands that group others (`gcdt dataset mix`), with their help.
+GROUPS = {
+    "dataset": "inspect, mix, subset, import and export datasets",
+    "tqc": "TQC+HER: the online baseline and the paper's expert",
+}
+_REGION_HELP = (
+    "draw the desired goals from this box only (world coordinates, metres; an empty bound is "
+    "open), e.g. y=0: for one half of the table"
 )
 
 
@@ -39,8 +53,8 @@ class _Parser(argparse.ArgumentParser):
     """argparse, but its errors are one line (no usage block) and exit with status 2.
 
     `arguments(parser)`, when given, adds the parser's arguments the first time it parses
-    (`gcdt train --help` included): they come from a module that imports torch, which
-    `gcdt --help` and the other commands should not wait for.
+    (its `--help` included): `gcdt --help` builds no command's options, and `gcdt train`'s
+    come from a module that imports torch, which the other commands should not wait for.
     """
 
     def __init__(
@@ -60,304 +74,191 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(USAGE_ERROR)
 
 
-def _success_rate(text: str) -> float:
-    """An argparse type: a success rate in (0, 1]."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 < value <= 1:  # NaN fails too
-        raise argparse.ArgumentTypeError(f"expected a success rate in (0, 1], got {text}")
-    return value
+@dataclass(frozen=True, kw_only=True)
+class _Command:
+    """A command: `name` (`group command` for one in a group), its options as fields, and the
+    first line of its docstring as its help."""
+
+    name: ClassVar[str]
+
+    def __post_init__(self) -> None:
+        check_minimums(self)
+
+    @staticmethod
+    def names() -> dict[str, Any]:
+        """The names its annotations use that `gcdt.cli` imports only when it runs."""
+        return {}
+
+    def run(self, command: str) -> int:
+        """Do the work; `command` is the command line, as result files record it."""
+        raise NotImplementedError
 
 
-def _int_at_least(minimum: int) -> Callable[[str], int]:
-    """An argparse type: an integer >= `minimum`, with a message that says so."""
-    wanted = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {wanted}, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"expected {wanted}, got {value}")
-        return value
-
-    return parse
+@dataclass(frozen=True, kw_only=True)
+class _Progress:
+    no_progress: bool = setting(False, "hide the progress bar")
 
 
-_positive_int = _int_at_least(1)
+@dataclass(frozen=True, kw_only=True)
+class _WritesDataset(_Command):
+    out: Path = setting(REQUIRED, "the dataset file to write", metavar="PATH.npz")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not str(self.out).endswith(".npz"):
+            raise GcdtError(f"dataset paths end in .npz, got {str(self.out)!r}")
 
 
-def _ratio(text: str) -> float:
-    """An argparse type: a fraction within [0, 1]."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from None
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text}")
-    return value
+@dataclass(frozen=True, kw_only=True)
+class PolicyOptions:
+    """The policy a command runs, on its task."""
 
-
-def _gif_path(text: str) -> Path:
-    """An argparse type: an output animation path, which must end in .gif."""
-    if not text.endswith(".gif"):
-        raise argparse.ArgumentTypeError(f"animations are GIF files ending in .gif, got {text!r}")
-    return Path(text)
-
-
-def _npz_path(text: str) -> Path:
-    """An argparse type: an output dataset path, which must end in .npz."""
-    if not text.endswith(".npz"):
-        raise argparse.ArgumentTypeError(f"dataset paths end in .npz, got {text!r}")
-    return Path(text)
-
-
-def _add_field_option(
-    parser: Any, field: dataclasses.Field, kind: Any, flag: str | None = None, **settings: Any
-) -> None:
-    """Option `flag` (default `--field-name`) for a dataclass field of type `kind`, parsed into
-    `field.name`: the field's default and help (`metadata["help"]`), and choices (a
-    `Literal`), a switch (`bool`), an integer of at least `metadata["minimum"]`, or `kind` as
-    the type. `settings` adds to or overrides these argparse settings (e.g. `metavar`)."""
-    option: dict[str, Any] = {
-        "dest": field.name,
-        "default": field.default,
-        "help": field.metadata["help"],
-    }
-    if kind is bool:
-        option["action"] = "store_true"
-    elif typing.get_origin(kind) is typing.Literal:
-        option["choices"] = typing.get_args(kind)
-    elif "minimum" in field.metadata:
-        option["type"] = _int_at_least(field.metadata["minimum"])
-    else:
-        option["type"] = kind
-    if field.default is not None and kind is not bool:
-        option["help"] += " (default: %(default)s)"
-    parser.add_argument(flag or f"--{field.name.replace('_', '-')}", **{**option, **settings})
-
-
-def _add_config_options(
-    parser: argparse.ArgumentParser,
-    config: type,
-    exclusive: tuple[str, ...] = (),
-    settings: dict[str, dict[str, Any]] | None = None,
-) -> None:
-    """An option per field of the dataclass `config` (`_add_field_option`, with the field's
-    `settings`); those of the fields named in `exclusive` in one mutually exclusive group."""
-    kinds = typing.get_type_hints(config)
-    group = parser.add_mutually_exclusive_group() if exclusive else parser
-    for field in dataclasses.fields(config):
-        target = group if field.name in exclusive else parser
-        _add_field_option(target, field, kinds[field.name], **(settings or {}).get(field.name, {}))
-
-
-def _config_from(args: argparse.Namespace, config: type) -> Any:
-    """The dataclass `config` with the values of its options (`_add_config_options`)."""
-    return config(**{f.name: getattr(args, f.name) for f in dataclasses.fields(config)})
-
-
-def _build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="gcdt",
-        description="Goal-Conditioned Decision Transformer on panda-gym: datasets and evaluation.",
+    policy: str = setting(
+        REQUIRED,
+        "a policy name, tqc:PATH of a TQC+HER zip (gcdt tqc train), or the path of a "
+        "GC-DT/DT/BC checkpoint (gcdt train)",
+        metavar=POLICY_SPECS,
     )
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    for add_command in (
-        _evaluate_parser,
-        _rollout_parser,
-        _collect_parser,
-        _dataset_parser,
-        _train_parser,
-        _tqc_parser,
-        _sweep_parser,
-        _report_parser,
-        _compare_parser,
-        _publish_parser,
-    ):
-        add_command(sub)
-    return parser
-
-
-def _add_policy_options(parser: argparse.ArgumentParser, *, reward: bool) -> None:
-    """What every command that runs a policy asks for: the policy, its task (and reward), and
-    the scripted expert's action noise."""
-    parser.add_argument("--policy", required=True, metavar=POLICY_SPECS, help=POLICY_HELP)
-    parser.add_argument("--task", required=True, choices=list(TASKS))
-    if reward:
-        parser.add_argument("--reward", required=True, choices=list(REWARDS))
-    parser.add_argument("--noise", type=float, default=0.0, help="scripted expert action noise std")
-
-
-def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
-    ev = sub.add_parser(
-        "evaluate",
-        help="measure a policy's success rate and return",
-        description="Run a policy with the paper's protocol: a fixed budget of env steps "
-        f"(default {DEFAULT_TIMESTEPS:,}) counting every finished episode, or a fixed number "
-        "of episodes.",
-    )
-    _add_policy_options(ev, reward=True)
-    _add_config_options(
-        ev,
-        EvaluationConfig,
-        exclusive=("timesteps", "episodes"),
-        settings={"n_envs": {"flag": "--envs", "metavar": "N"}},
-    )
-    ev.add_argument(
-        "--target-return",
-        type=float,
+    task: str = setting(REQUIRED, "the task", choices=TASKS)
+    noise: float = setting(0.0, "scripted expert action noise std")
+    target_return: float | None = setting(
+        None,
+        "a DT checkpoint's target return at each episode's start (default 0, the paper's)",
         metavar="R",
-        help="a DT checkpoint's target return at each episode's start (default 0, the paper's)",
     )
-    ev.add_argument(
-        "--goal-region",
-        type=_goal_region,
-        metavar="AXIS=LOW:HIGH,...",
-        help="draw the desired goals from this box only (world coordinates, metres; an empty "
-        "bound is open), e.g. y=0: for one half of the table",
+    device: str | None = setting(
+        None, "where a DT or BC checkpoint runs: auto (the default, CUDA when present), cpu or cuda"
     )
-    ev.add_argument(
-        "--device",
-        help="where a DT or BC checkpoint runs: auto (the default, CUDA when present), cpu or cuda",
-    )
-    ev.add_argument("--json", action="store_true", help="print the summary as one JSON line")
-    ev.add_argument(
-        "--out",
-        type=Path,
-        metavar="PATH",
-        help="also write the full result (summary, every episode, the command) as JSON",
-    )
-    ev.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    ev.set_defaults(run=_evaluate)
 
+    def __post_init__(self) -> None:
+        if self.noise and self.policy != "scripted":
+            raise GcdtError("--noise applies only to --policy scripted")
+        checkpoint = self.policy not in POLICY_NAMES and not self.policy.startswith(TQC_PREFIX)
+        if self.target_return is not None and not checkpoint:
+            raise GcdtError("--target-return applies only to a DT checkpoint (gcdt train)")
+        if self.device is not None and not checkpoint:
+            raise GcdtError("--device applies only to a DT or BC checkpoint (gcdt train)")
 
-def _evaluate(args: argparse.Namespace) -> int:
-    from gcdt.evaluation import evaluate
-    from gcdt.policies import make_policy
+    def make(self):
+        """The policy, for the task."""
+        from gcdt.policies import make_policy
 
-    if args.out is not None:
-        check_writable(args.out)  # before the run, not after it
-    policy = make_policy(args.policy, args.task, **_policy_kwargs(args))
-    config = dataclasses.asdict(_config_from(args, EvaluationConfig))
-    result = evaluate(
-        policy,
-        args.task,
-        args.reward,
-        **config,
-        goal_region=args.goal_region,
-        progress=not args.no_progress,
-    )
-    summary = result.summary
-    if args.out is not None:
-        record = {"command": _command(args), **result.to_dict()}
-        write_json_atomic(args.out, record)
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        print(
-            f"{summary['policy']} on {summary['task']}/{summary['reward']}: "
-            f"success {100 * summary['success_rate']:.1f} %, "
-            f"return {summary['mean_return']:.2f} ± {summary['std_return']:.2f} "
-            f"over {summary['episodes']} episodes ({summary['timesteps']} steps, "
-            f"{summary['steps_per_second']:.0f} steps/s)"
-            if summary["episodes"]
-            else f"no episode finished within {summary['timesteps']} steps"
+        if self.policy == "scripted":
+            return make_policy(self.policy, self.task, noise_std=self.noise)
+        given = {"target_return": self.target_return, "device": self.device}
+        return make_policy(
+            self.policy, self.task, **{k: v for k, v in given.items() if v is not None}
         )
-    return 0
 
 
-def _rollout_parser(sub: argparse._SubParsersAction) -> None:
-    ro = sub.add_parser(
-        "rollout",
-        help="record one episode as an animated GIF, towards a goal of your choice",
-        description="Render evaluation episode 0 of --seed headless and save it as a GIF; "
-        "--goal replaces its desired goal (the explorer of notebook 07, from the shell).",
+@dataclass(frozen=True, kw_only=True)
+class Evaluate(_Command, _Progress):
+    """measure a policy's success rate and return
+
+    Run a policy with the paper's protocol, a fixed budget of env steps counting every finished
+    episode, or a fixed number of episodes."""
+
+    name = "evaluate"
+    agent: PolicyOptions
+    reward: RewardType = setting(REQUIRED, "the rewards the returns sum")
+    evaluation: EvaluationConfig
+    goal_region: GoalRegion | None = setting(
+        None, _REGION_HELP, metavar="AXIS=LOW:HIGH,...", parse=GoalRegion.parse
     )
-    _add_policy_options(ro, reward=True)
-    ro.add_argument(
-        "--goal",
-        type=_goal,
-        metavar="X,Y,Z",
-        help="the desired goal in world coordinates (metres), within the task's goal range",
+    json: bool = setting(False, "print the summary as one JSON line")
+    out: Path | None = setting(
+        None,
+        "also write the full result (summary, every episode, the command) as JSON",
+        metavar="PATH",
     )
-    ro.add_argument(
-        "--target-return",
-        type=float,
-        metavar="R",
-        help="a DT checkpoint's target return (default 0, the paper's)",
-    )
-    ro.add_argument("--seed", type=_int_at_least(0), default=0, help="evaluation seed")
-    ro.add_argument("--size", type=_int_at_least(16), default=360, help="frame size, pixels")
-    ro.add_argument("--out", type=_gif_path, required=True, metavar="PATH.gif")
-    ro.set_defaults(run=_rollout)
+
+    def run(self, command: str) -> int:
+        from gcdt.evaluation import evaluate
+
+        if self.out is not None:
+            check_writable(self.out)  # before the run, not after it
+        result = evaluate(
+            self.agent.make(),
+            self.agent.task,
+            self.reward,
+            **dataclasses.asdict(self.evaluation),
+            goal_region=self.goal_region,
+            progress=not self.no_progress,
+        )
+        summary = result.summary
+        if self.out is not None:
+            write_json_atomic(self.out, {"command": command, **result.to_dict()})
+        if self.json:
+            print(json.dumps(summary))
+        else:
+            print(
+                f"{summary['policy']} on {summary['task']}/{summary['reward']}: "
+                f"success {100 * summary['success_rate']:.1f} %, "
+                f"return {summary['mean_return']:.2f} ± {summary['std_return']:.2f} "
+                f"over {summary['episodes']} episodes ({summary['timesteps']} steps, "
+                f"{summary['steps_per_second']:.0f} steps/s)"
+                if summary["episodes"]
+                else f"no episode finished within {summary['timesteps']} steps"
+            )
+        return 0
 
 
-def _goal(text: str):
-    import numpy as np
-
+def _goal(text: str) -> tuple[float, ...]:
+    """X,Y,Z in metres."""
     try:
-        goal = np.array([float(v) for v in text.split(",")])
+        goal = tuple(float(v) for v in text.split(","))
     except ValueError:
-        goal = np.array([])
-    if goal.shape != (3,):
-        raise argparse.ArgumentTypeError(f"a goal is three numbers X,Y,Z in metres, got {text!r}")
+        goal = ()
+    if len(goal) != 3:
+        raise GcdtError(f"a goal is three numbers X,Y,Z in metres, got {text!r}")
     return goal
 
 
-def _rollout(args: argparse.Namespace) -> int:
-    from gcdt.evaluation import record_rollout
-    from gcdt.policies import make_policy
+@dataclass(frozen=True, kw_only=True)
+class Rollout(_Command):
+    """record one episode as an animated GIF, towards a goal of your choice
 
-    check_writable(args.out)
-    policy = make_policy(args.policy, args.task, **_policy_kwargs(args))
-    rec = record_rollout(
-        policy, args.task, args.reward, args.seed, path=args.out, size=args.size, goal=args.goal
+    Render evaluation episode 0 of --seed headless and save it as a GIF; --goal replaces its
+    desired goal (the explorer of notebook 07, from the shell)."""
+
+    name = "rollout"
+    agent: PolicyOptions
+    reward: RewardType = setting(REQUIRED, "the rewards the return sums")
+    goal: tuple[float, ...] | None = setting(
+        None,
+        "the desired goal in world coordinates (metres), within the task's goal range",
+        metavar="X,Y,Z",
+        parse=_goal,
     )
-    goal = ", ".join(f"{v:.3f}" for v in rec.goal)
-    print(
-        f"{policy.name} on {args.task}/{args.reward} towards ({goal}): {rec.verdict}, "
-        f"return {rec.ret:.2f} over {rec.steps} steps: {args.out}"
-    )
-    return 0
+    seed: int = setting(0, "evaluation seed", minimum=0)
+    size: int = setting(360, "frame size, pixels", minimum=16)
+    out: Path = setting(REQUIRED, "the animation to write", metavar="PATH.gif")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not str(self.out).endswith(".gif"):
+            raise GcdtError(f"animations are GIF files ending in .gif, got {str(self.out)!r}")
+
+    def run(self, command: str) -> int:
+        import numpy as np
+
+        from gcdt.evaluation import record_rollout
+
+        check_writable(self.out)
+        policy, task = self.agent.make(), self.agent.task
+        goal = None if self.goal is None else np.array(self.goal)
+        rec = record_rollout(
+            policy, task, self.reward, self.seed, path=self.out, size=self.size, goal=goal
+        )
+        where = ", ".join(f"{v:.3f}" for v in rec.goal)
+        print(
+            f"{policy.name} on {task}/{self.reward} towards ({where}): {rec.verdict}, "
+            f"return {rec.ret:.2f} over {rec.steps} steps: {self.out}"
+        )
+        return 0
 
 
-def _goal_region(text: str):
-    from gcdt.regions import GoalRegion
-
-    try:
-        return GoalRegion.parse(text)
-    except GcdtError as err:  # argparse turns this into a usage error, exit 2
-        raise argparse.ArgumentTypeError(str(err)) from None
-
-
-def _command(args: argparse.Namespace) -> str:
-    """The command line that is running, as recorded in result files and datasets."""
-    return " ".join(["gcdt", *args.argv])
-
-
-def _policy_kwargs(args: argparse.Namespace) -> dict:
-    if args.noise and args.policy != "scripted":
-        raise GcdtError("--noise applies only to --policy scripted")
-    checkpoint = args.policy not in POLICY_NAMES and not args.policy.startswith(TQC_PREFIX)
-    kwargs = {}
-    target = getattr(args, "target_return", None)
-    if target is not None:
-        if not checkpoint:
-            raise GcdtError("--target-return applies only to a DT checkpoint (gcdt train)")
-        kwargs["target_return"] = target
-    device = getattr(args, "device", None)
-    if device is not None:
-        if not checkpoint:
-            raise GcdtError("--device applies only to a DT or BC checkpoint (gcdt train)")
-        kwargs["device"] = device
-    return {"noise_std": args.noise} if args.policy == "scripted" else kwargs
-
-
-def _report(dataset, path: Path | None, as_json: bool) -> None:
+def _report(dataset, path: Path | None, as_json: bool = False) -> None:
     """Print a dataset's summary: one JSON line, or one readable line."""
     summary = dataset.summary()
     if as_json:
@@ -374,338 +275,311 @@ def _report(dataset, path: Path | None, as_json: bool) -> None:
     )
 
 
-def _collect_parser(sub: argparse._SubParsersAction) -> None:
-    co = sub.add_parser(
-        "collect",
-        help="collect an offline dataset with a policy",
-        description="Run a policy on parallel envs and save its first whole episodes that "
-        "add up to at least N transitions (both reward types are stored).",
-    )
-    _add_policy_options(co, reward=False)
-    co.add_argument("--transitions", required=True, type=_positive_int, metavar="N")
-    co.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
-    co.add_argument("--seed", type=_int_at_least(0), default=0)
-    co.add_argument("--envs", type=_positive_int, default=1, help="parallel env processes")
-    co.add_argument(
-        "--labels",
-        choices=LABELS,
-        default="executed",
-        help="the action recorded: executed (what the env ran) or clean (the expert's action "
+@dataclass(frozen=True, kw_only=True)
+class Collect(_WritesDataset, _Progress):
+    """collect an offline dataset with a policy
+
+    Run a policy on parallel envs and save its first whole episodes that add up to at least N
+    transitions (both reward types are stored)."""
+
+    name = "collect"
+    agent: PolicyOptions
+    transitions: int = setting(REQUIRED, "transitions to collect, at least", minimum=1, metavar="N")
+    seed: int = setting(0, "seeds the episodes", minimum=0)
+    envs: int = setting(1, "parallel env processes", minimum=1)
+    labels: str = setting(
+        "executed",
+        "the action recorded: executed (what the env ran) or clean (the expert's action "
         "before its noise, as in DART)",
+        choices=LABELS,
     )
-    co.add_argument(
-        "--goal-region",
-        type=_goal_region,
-        metavar="AXIS=LOW:HIGH,...",
-        help="draw the desired goals from this box only (world coordinates, metres), e.g. y=0:",
+    goal_region: GoalRegion | None = setting(
+        None, _REGION_HELP, metavar="AXIS=LOW:HIGH,...", parse=GoalRegion.parse
     )
-    co.add_argument("--json", action="store_true", help="print the summary as one JSON line")
-    co.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    co.set_defaults(run=_collect)
+    json: bool = setting(False, "print the summary as one JSON line")
+
+    def run(self, command: str) -> int:
+        from gcdt.data import collect
+
+        check_writable(self.out)  # before the collection, not after it
+        policy = self.agent.make()
+        dataset = collect(
+            policy,
+            self.agent.task,
+            self.transitions,
+            seed=self.seed,
+            n_envs=self.envs,
+            # Both rewards are stored; a trained agent runs under the one it was trained with.
+            reward=policy.config().get("reward") or "sparse",
+            labels=self.labels,
+            goal_region=self.goal_region,
+            progress=not self.no_progress,
+        )
+        dataset = dataset.with_metadata(command=command)
+        _report(dataset, dataset.save(self.out), self.json)
+        return 0
 
 
-def _collect(args: argparse.Namespace) -> int:
-    from gcdt.data import collect
-    from gcdt.policies import make_policy
+@dataclass(frozen=True, kw_only=True)
+class DatasetInfo(_Command):
+    """summary statistics and metadata of a dataset"""
 
-    check_writable(args.out)  # before the collection, not after it
-    policy = make_policy(args.policy, args.task, **_policy_kwargs(args))
-    dataset = collect(
-        policy,
-        args.task,
-        args.transitions,
-        seed=args.seed,
-        n_envs=args.envs,
-        # Both rewards are stored; a trained agent runs under the one it was trained with.
-        reward=policy.config().get("reward") or "sparse",
-        labels=args.labels,
-        goal_region=args.goal_region,
-        progress=not args.no_progress,
+    name = "dataset info"
+    path: Path = setting(REQUIRED, "the dataset", positional=True)
+    json: bool = setting(False, "print summary and metadata as JSON")
+
+    def run(self, command: str) -> int:
+        from gcdt.data import load_dataset
+
+        dataset = load_dataset(self.path)
+        if self.json:
+            print(json.dumps({"summary": dataset.summary(), "metadata": dataset.metadata}))
+        else:
+            _report(dataset, self.path)
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetMix(_WritesDataset):
+    """expert/random mixture by whole episodes (RQ5)"""
+
+    name = "dataset mix"
+    expert: Path = setting(REQUIRED, "the expert dataset")
+    random: Path = setting(REQUIRED, "the random dataset")
+    ratio: float = setting(REQUIRED, "expert fraction in [0, 1]")
+    size: int = setting(REQUIRED, "transitions", minimum=1)
+    seed: int = setting(0, "seeds the episodes drawn", minimum=0)
+
+    def run(self, command: str) -> int:
+        from gcdt.data import load_dataset, mix
+
+        check_writable(self.out)
+        expert, random = load_dataset(self.expert), load_dataset(self.random)
+        mixed = mix(expert, random, self.ratio, self.size, self.seed)
+        _report(mixed, mixed.save(self.out))
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetSubset(_WritesDataset):
+    """random whole episodes, about --size transitions (RQ4)"""
+
+    name = "dataset subset"
+    path: Path = setting(REQUIRED, "the dataset", positional=True)
+    size: int = setting(REQUIRED, "transitions", minimum=1)
+    seed: int = setting(0, "seeds the episodes drawn", minimum=0)
+
+    def run(self, command: str) -> int:
+        from gcdt.data import load_dataset, subset
+
+        check_writable(self.out)
+        part = subset(load_dataset(self.path), self.size, self.seed)
+        _report(part, part.save(self.out))
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetExportMinari(_Command):
+    """write a dataset as a local Minari dataset"""
+
+    name = "dataset export-minari"
+    path: Path = setting(REQUIRED, "the dataset", positional=True)
+    id: str | None = setting(None, "Minari id (default panda-gym/<task>/<policy>-v0)")
+    reward: RewardType = setting("sparse", "the rewards stored")
+
+    def run(self, command: str) -> int:
+        from gcdt.data import export_minari, load_dataset
+
+        exported = export_minari(load_dataset(self.path), self.id, reward=self.reward)
+        print(
+            f"exported {exported.total_steps} steps in {exported.total_episodes} episodes "
+            f"as Minari dataset {exported.spec.dataset_id!r}"
+        )
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetImportMinari(_WritesDataset):
+    """read a local Minari dataset"""
+
+    name = "dataset import-minari"
+    id: str = setting(REQUIRED, "the Minari id", positional=True)
+
+    def run(self, command: str) -> int:
+        from gcdt.data import import_minari
+
+        check_writable(self.out)
+        dataset = import_minari(self.id)
+        _report(dataset, dataset.save(self.out))
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetImportAuthors(_WritesDataset):
+    """read the authors' pickled list of episode dicts"""
+
+    name = "dataset import-authors"
+    pickle: Path = setting(REQUIRED, "the authors' pickle", positional=True)
+    task: str | None = setting(None, "needed only when widths are ambiguous", choices=TASKS)
+    trust_pickle: bool = setting(
+        False, "allow unpickling, which runs code from the file: only for trusted files"
     )
-    dataset = dataset.with_metadata(command=_command(args))
-    _report(dataset, dataset.save(args.out), args.json)
-    return 0
+
+    def run(self, command: str) -> int:
+        from gcdt.data import import_authors
+
+        check_writable(self.out)
+        dataset = import_authors(self.pickle, trust_pickle=self.trust_pickle, task=self.task)
+        _report(dataset, dataset.save(self.out))
+        return 0
 
 
-def _dataset_parser(sub: argparse._SubParsersAction) -> None:
-    ds = sub.add_parser("dataset", help="inspect, mix, subset, import and export datasets")
-    dsub = ds.add_subparsers(dest="dataset_command", required=True, parser_class=_Parser)
-    info = dsub.add_parser("info", help="summary statistics and metadata of a dataset")
-    info.add_argument("path", type=Path)
-    info.add_argument("--json", action="store_true", help="print summary and metadata as JSON")
-    info.set_defaults(run=_dataset_info)
+@dataclass(frozen=True, kw_only=True)
+class Train(_Command, _Progress):
+    """train GC-DT, a DT ablation or BC on a dataset
 
-    mx = dsub.add_parser("mix", help="expert/random mixture by whole episodes (RQ5)")
-    mx.add_argument("--expert", required=True, type=Path)
-    mx.add_argument("--random", required=True, type=Path)
-    mx.add_argument("--ratio", required=True, type=_ratio, help="expert fraction in [0, 1]")
-    mx.add_argument("--size", required=True, type=_positive_int, help="transitions")
-    mx.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
-    mx.add_argument("--seed", type=_int_at_least(0), default=0)
-    mx.set_defaults(run=_dataset_mix)
+    Train from an offline dataset with the paper's recipe; writes a checkpoint (usable as
+    evaluate --policy) and the training log into --out."""
 
-    sb = dsub.add_parser("subset", help="random whole episodes, about --size transitions (RQ4)")
-    sb.add_argument("path", type=Path)
-    sb.add_argument("--size", required=True, type=_positive_int, help="transitions")
-    sb.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
-    sb.add_argument("--seed", type=_int_at_least(0), default=0)
-    sb.set_defaults(run=_dataset_subset)
+    name = "train"
+    dataset: Path = setting(REQUIRED, "the offline dataset", metavar="PATH.npz")
+    out: Path = setting(REQUIRED, "the folder to write into", metavar="DIR")
+    task: str | None = setting(None, "refuse a dataset of another task", choices=TASKS)
+    config: TrainConfig
+    resume: bool = setting(False, "continue from the checkpoint in --out")
 
-    ex = dsub.add_parser("export-minari", help="write a dataset as a local Minari dataset")
-    ex.add_argument("path", type=Path)
-    ex.add_argument("--id", help="Minari id (default panda-gym/<task>/<policy>-v0)")
-    ex.add_argument("--reward", choices=list(REWARDS), default="sparse")
-    ex.set_defaults(run=_dataset_export_minari)
+    @staticmethod
+    def names() -> dict[str, Any]:
+        from gcdt.training import TrainConfig
 
-    im = dsub.add_parser("import-minari", help="read a local Minari dataset")
-    im.add_argument("id")
-    im.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
-    im.set_defaults(run=_dataset_import_minari)
+        return {"TrainConfig": TrainConfig}
 
-    ia = dsub.add_parser("import-authors", help="read the authors' pickled list of episode dicts")
-    ia.add_argument("pickle", type=Path)
-    ia.add_argument("--out", required=True, type=_npz_path, metavar="PATH.npz")
-    ia.add_argument("--task", choices=list(TASKS), help="needed only when widths are ambiguous")
-    ia.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help="allow unpickling, which runs code from the file: only for trusted files",
+    def run(self, command: str) -> int:
+        from gcdt.data import load_dataset
+        from gcdt.training import train
+
+        check_writable(self.out, folder=True)
+        dataset = load_dataset(self.dataset)
+        if self.task is not None and dataset.task != self.task:
+            raise GcdtError(f"{self.dataset} holds {dataset.task!r} data, not {self.task!r}")
+        result = train(
+            dataset, self.config, self.out, resume=self.resume, progress=not self.no_progress
+        )
+        print(
+            f"trained {result.steps} steps in {result.seconds:.0f} s, final loss "
+            f"{result.final_loss:.4f}: {result.checkpoint}"
+        )
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class TQCTrain(_Command, _Progress):
+    """train TQC+HER online on one task and reward
+
+    Train TQC with HER (hyperparameters and loop: gcdt/baselines/tqc_her.yaml), evaluating it
+    periodically; writes the last and the best model, the learning curve and run.json to
+    --out."""
+
+    name = "tqc train"
+    task: str = setting(REQUIRED, "the task", choices=TASKS)
+    reward: RewardType = setting(REQUIRED, "the rewards it learns from")
+    out: Path = setting(REQUIRED, "the folder to write into", metavar="DIR")
+    config: str = setting(
+        "paper",
+        "paper: rl-baselines3-zoo her-defaults (GPU-scale); cpu: smaller nets and batches",
+        choices=tqc_config_names,
     )
-    ia.set_defaults(run=_dataset_import_authors)
-
-
-def _dataset_info(args: argparse.Namespace) -> int:
-    from gcdt.data import load_dataset
-
-    dataset = load_dataset(args.path)
-    if args.json:
-        print(json.dumps({"summary": dataset.summary(), "metadata": dataset.metadata}))
-    else:
-        _report(dataset, args.path, False)
-    return 0
-
-
-def _dataset_mix(args: argparse.Namespace) -> int:
-    from gcdt.data import load_dataset, mix
-
-    check_writable(args.out)
-    mixed = mix(
-        load_dataset(args.expert), load_dataset(args.random), args.ratio, args.size, args.seed
+    steps: int | None = setting(None, "env steps (default: the config's)")
+    backend: str | None = setting(
+        None,
+        "sbx: SBX's JAX TQC; sb3: sb3-contrib's, rl-baselines3-zoo's loop (default: the config's)",
+        choices=TQC_BACKENDS,
     )
-    _report(mixed, mixed.save(args.out), False)
-    return 0
-
-
-def _dataset_subset(args: argparse.Namespace) -> int:
-    from gcdt.data import load_dataset, subset
-
-    check_writable(args.out)
-    part = subset(load_dataset(args.path), args.size, args.seed)
-    _report(part, part.save(args.out), False)
-    return 0
-
-
-def _dataset_export_minari(args: argparse.Namespace) -> int:
-    from gcdt.data import export_minari, load_dataset
-
-    exported = export_minari(load_dataset(args.path), args.id, reward=args.reward)
-    print(
-        f"exported {exported.total_steps} steps in {exported.total_episodes} episodes "
-        f"as Minari dataset {exported.spec.dataset_id!r}"
+    n_envs: int | None = setting(None, "envs side by side (default: the config's)", metavar="N")
+    settings: TQCRunSettings
+    resume: bool = setting(
+        False, "continue the run in --out from its checkpoint (same command otherwise)"
     )
-    return 0
+
+    def run(self, command: str) -> int:
+        from gcdt.baselines.tqc_her import load_tqc_config, train_tqc
+
+        check_writable(self.out, folder=True)
+        changes = {"steps": self.steps, "backend": self.backend, "n_envs": self.n_envs}
+        cfg = load_tqc_config(self.config, self.task).with_budget(
+            **{k: v for k, v in changes.items() if v is not None}
+        )
+        result = train_tqc(
+            self.task,
+            self.reward,
+            cfg,
+            self.out,
+            progress=not self.no_progress,
+            command=command,
+            resume=self.resume,
+            **dataclasses.asdict(self.settings),
+        )
+        print(
+            f"TQC+HER {self.task}/{self.reward} ({cfg.name}): {result.env_steps} env steps in "
+            f"{result.train_seconds:.0f} s ({result.env_steps_per_second:.1f} steps/s), "
+            f"final success {100 * result.final_success_rate:.0f} %, "
+            f"best {100 * result.best_success_rate:.0f} %: {result.model}"
+        )
+        return 0
 
 
-def _dataset_import_minari(args: argparse.Namespace) -> int:
-    from gcdt.data import import_minari
-
-    check_writable(args.out)
-    dataset = import_minari(args.id)
-    _report(dataset, dataset.save(args.out), False)
-    return 0
+_PROFILE_HELP = "the size of the grid (docs/experiments.md)"
 
 
-def _dataset_import_authors(args: argparse.Namespace) -> int:
-    from gcdt.data import import_authors
+@dataclass(frozen=True, kw_only=True)
+class Sweep(_Command, _Progress):
+    """run the experiment grid of a profile (skips finished runs)
 
-    check_writable(args.out)
-    dataset = import_authors(args.pickle, trust_pickle=args.trust_pickle, task=args.task)
-    _report(dataset, dataset.save(args.out), False)
-    return 0
+    Run every run of a profile's grid whose result is not in results/PROFILE/runs/ yet (under
+    $GCDT_OUTPUTS when set, else the repository's); failed and untrusted results are run
+    again."""
 
+    name = "sweep"
+    profile: str = setting(REQUIRED, _PROFILE_HELP, choices=PROFILES)
+    backend: str = setting("local", "a process pool, or Ray", choices=BACKENDS)
+    address: str | None = setting(None, "Ray cluster address HOST:PORT (default: a local Ray)")
+    only: str | None = setting(None, "one section of the grid", choices=SECTIONS)
+    workers: int | None = setting(None, "parallel runs (default: cores)", minimum=1)
+    dry_run: bool = setting(False, "list the runs, their state and estimated cost")
 
-def _train_parser(sub: argparse._SubParsersAction) -> None:
-    sub.add_parser(
-        "train",
-        help="train GC-DT, a DT ablation or BC on a dataset",
-        arguments=_train_arguments,
-    ).set_defaults(run=_train)
+    def run(self, command: str) -> int:
+        from gcdt.experiments import get_profile, results_dir, sweep
 
+        profile = get_profile(self.profile)
+        if self.dry_run:
+            return self._dry_run(profile)
+        from gcdt.paths import artifacts_dir
 
-def _train_arguments(tr: argparse.ArgumentParser) -> None:
-    """`gcdt train`'s arguments: its files, and an option per `TrainConfig` field."""
-    from gcdt.checkpoint import CHECKPOINT_NAME
-    from gcdt.training import LOG_NAME, TrainConfig
-
-    tr.description = (
-        f"Train from an offline dataset with the paper's recipe; writes {CHECKPOINT_NAME} "
-        f"(usable as evaluate --policy) and {LOG_NAME} into --out."
-    )
-    tr.add_argument("--dataset", required=True, type=Path, metavar="PATH.npz")
-    tr.add_argument("--out", required=True, type=Path, metavar="DIR")
-    tr.add_argument("--task", choices=list(TASKS), help="refuse a dataset of another task")
-    _add_config_options(
-        tr,
-        TrainConfig,
-        exclusive=("steps", "epochs"),
-        settings={"context": {"metavar": "K"}, "checkpoint_seconds": {"metavar": "S"}},
-    )
-    tr.add_argument("--resume", action="store_true", help=f"continue from --out/{CHECKPOINT_NAME}")
-    tr.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-
-
-def _train(args: argparse.Namespace) -> int:
-    from gcdt.data import load_dataset
-    from gcdt.training import TrainConfig, train
-
-    check_writable(args.out, folder=True)
-    dataset = load_dataset(args.dataset)
-    if args.task is not None and dataset.task != args.task:
-        raise GcdtError(f"{args.dataset} holds {dataset.task!r} data, not {args.task!r}")
-    cfg = _config_from(args, TrainConfig)
-    result = train(dataset, cfg, args.out, resume=args.resume, progress=not args.no_progress)
-    print(
-        f"trained {result.steps} steps in {result.seconds:.0f} s, final loss "
-        f"{result.final_loss:.4f}: {result.checkpoint}"
-    )
-    return 0
-
-
-def _tqc_parser(sub: argparse._SubParsersAction) -> None:
-    tq = sub.add_parser("tqc", help="TQC+HER: the online baseline and the paper's expert")
-    tqsub = tq.add_subparsers(dest="tqc_command", required=True, parser_class=_Parser)
-    tt = tqsub.add_parser(
-        "train",
-        help="train TQC+HER online on one task and reward",
-        description="Train TQC with HER (hyperparameters and loop: gcdt/baselines/"
-        f"tqc_her.yaml), evaluating it periodically; writes {', '.join(RUN_FILES)} to --out.",
-    )
-    tt.add_argument("--task", required=True, choices=list(TASKS))
-    tt.add_argument("--reward", required=True, choices=list(REWARDS))
-    tt.add_argument("--out", required=True, type=Path, metavar="DIR")
-    tt.add_argument(
-        "--config",
-        default="paper",
-        choices=tqc_config_names(),
-        help="paper: rl-baselines3-zoo her-defaults (GPU-scale); cpu: smaller nets and batches",
-    )
-    tt.add_argument("--steps", type=_positive_int, help="env steps (default: the config's)")
-    tt.add_argument(
-        "--backend",
-        choices=list(TQC_BACKENDS),
-        help="sbx: SBX's JAX TQC, 2.7x faster on 2 CPU cores; sb3: sb3-contrib's "
-        "(default: the config's)",
-    )
-    tt.add_argument(
-        "--n-envs", type=_positive_int, metavar="N", help="envs side by side (default: config's)"
-    )
-    tt.add_argument(
-        "--stop-at",
-        type=_success_rate,
-        metavar="RATE",
-        help="stop at the first evaluation whose success rate reaches RATE (0-1]",
-    )
-    tt.add_argument("--seed", type=_int_at_least(0), default=0)
-    tt.add_argument(
-        "--eval-every", type=_positive_int, metavar="N", help="env steps between evaluations"
-    )
-    tt.add_argument("--eval-episodes", type=_positive_int, default=20, metavar="N")
-    tt.add_argument("--device", default="auto", help="auto (CUDA when present), cpu or cuda")
-    tt.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    tt.add_argument(
-        "--resume",
-        action="store_true",
-        help="continue the run in --out from its checkpoint (same command otherwise)",
-    )
-    tt.add_argument(
-        "--checkpoint-seconds",
-        type=float,
-        default=CHECKPOINT_SECONDS,
-        metavar="S",
-        help=f"seconds between checkpoints (default {CHECKPOINT_SECONDS:g}; 0: every loop "
-        "iteration)",
-    )
-    tt.set_defaults(run=_tqc_train)
-
-
-def _tqc_train(args: argparse.Namespace) -> int:
-    from gcdt.baselines.tqc_her import load_tqc_config, train_tqc
-
-    check_writable(args.out, folder=True)
-    cfg = load_tqc_config(args.config, args.task)
-    changes = {"steps": args.steps, "backend": args.backend, "n_envs": args.n_envs}
-    cfg = cfg.with_budget(**{k: v for k, v in changes.items() if v is not None})
-    result = train_tqc(
-        args.task,
-        args.reward,
-        cfg,
-        args.out,
-        seed=args.seed,
-        eval_every=args.eval_every,
-        eval_episodes=args.eval_episodes,
-        device=args.device,
-        stop_at=args.stop_at,
-        progress=not args.no_progress,
-        command=_command(args),
-        resume=args.resume,
-        checkpoint_seconds=args.checkpoint_seconds,
-    )
-    final = result.final_success_rate
-    print(
-        f"TQC+HER {args.task}/{args.reward} ({cfg.name}): {result.env_steps} env steps in "
-        f"{result.train_seconds:.0f} s ({result.env_steps_per_second:.1f} steps/s), "
-        f"final success {100 * final:.0f} %, best {100 * result.best_success_rate:.0f} %: "
-        f"{result.model}"
-    )
-    return 0
-
-
-def _sweep_parser(sub: argparse._SubParsersAction) -> None:
-    sw = sub.add_parser(
-        "sweep",
-        help="run the experiment grid of a profile (skips finished runs)",
-        description="Run every run of a profile's grid whose result is not in "
-        "results/PROFILE/runs/ yet (under $GCDT_OUTPUTS when set, else the repository's); "
-        "failed and untrusted results are run again.",
-    )
-    sw.add_argument("--profile", required=True, choices=list(PROFILES))
-    sw.add_argument("--backend", default="local", choices=list(BACKENDS))
-    sw.add_argument("--address", help="Ray cluster address HOST:PORT (default: a local Ray)")
-    sw.add_argument("--only", choices=list(SECTIONS), help="one section of the grid")
-    sw.add_argument("--workers", type=_positive_int, help="parallel runs (default: cores)")
-    sw.add_argument(
-        "--dry-run", action="store_true", help="list the runs, their state and estimated cost"
-    )
-    sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    sw.set_defaults(run=_sweep)
-
-
-def _sweep(args: argparse.Namespace) -> int:
-    from gcdt.experiments import get_profile, plan, results_dir, sweep
-    from gcdt.experiments.costs import CostModel
-    from gcdt.experiments.store import RunStore
-    from gcdt.experiments.sweep import default_workers, shared_cost
-
-    profile = get_profile(args.profile)
-    if not args.dry_run:  # before hours of runs, not after the first one
-        from gcdt.paths import artifacts_dir, check_writable
-
+        # Before hours of runs, not after the first one.
         check_writable(results_dir(profile.name) / "runs", folder=True, option="results folder")
         check_writable(artifacts_dir(), folder=True, option="artifacts folder (GCDT_ARTIFACTS)")
-    if args.dry_run:
+        summary = sweep(
+            profile,
+            backend=self.backend,
+            address=self.address,
+            only=self.only,
+            workers=self.workers,
+            progress=not self.no_progress,
+        )
+        for warning in summary.warnings:
+            print(f"warning: {warning}", file=sys.stderr)
+        print(summary.line())
+        return 0 if summary.ok else 1
+
+    def _dry_run(self, profile) -> int:
+        from gcdt.experiments import plan, results_dir
+        from gcdt.experiments.costs import CostModel
+        from gcdt.experiments.store import RunStore
+        from gcdt.experiments.sweep import default_workers, shared_cost
+
         costs = CostModel.measured()  # reads the bench JSON and every result file: once
         store = RunStore(results_dir(profile.name) / "runs")
-        planned, warnings = plan(profile, store, args.only, costs)
+        planned, warnings = plan(profile, store, self.only, costs)
         for warning in warnings:
             print(f"warning: {warning}", file=sys.stderr)
         for p in planned:
@@ -714,73 +588,58 @@ def _sweep(args: argparse.Namespace) -> int:
                 f"{p.entry.spec.label}  [{', '.join(p.entry.sections)}]"
             )
         todo = [p for p in planned if p.state != "done"]
-        workers = args.workers or default_workers(profile)
+        workers = self.workers or default_workers(profile)
         total = sum(p.estimate_seconds for p in todo) + shared_cost(todo, costs)
         print(
             f"{len(planned)} runs, {len(todo)} to run: about {total / 3600:.1f} h of work, "
             f"{total / 3600 / workers:.1f} h on {workers} worker(s) (estimate)"
         )
         return 0
-    summary = sweep(
-        profile,
-        backend=args.backend,
-        address=args.address,
-        only=args.only,
-        workers=args.workers,
-        progress=not args.no_progress,
-    )
-    for warning in summary.warnings:
-        print(f"warning: {warning}", file=sys.stderr)
-    print(summary.line())
-    return 0 if summary.ok else 1
 
 
-def _report_parser(sub: argparse._SubParsersAction) -> None:
-    rp = sub.add_parser(
-        "report",
-        help="tables and figures of the paper from results/PROFILE/runs/",
-        description="Write Table 1 and the ablation table (CSV, Markdown, LaTeX), Fig. 2-4 "
-        "and the learning curves (PNG, PDF) from a profile's finished runs (results/ and "
-        "figures/ under $GCDT_OUTPUTS when set, else the repository's).",
-    )
-    rp.add_argument("--profile", required=True, choices=list(PROFILES))
-    rp.add_argument("--readme", action="store_true", help="also update README.md's results")
-    rp.add_argument(
-        "--wall-seconds",
-        type=float,
+@dataclass(frozen=True, kw_only=True)
+class Report(_Command):
+    """tables and figures of the paper from results/PROFILE/runs/
+
+    Write Table 1 and the ablation table (CSV, Markdown, LaTeX), Fig. 2-4 and the learning
+    curves (PNG, PDF) from a profile's finished runs (results/ and figures/ under
+    $GCDT_OUTPUTS when set, else the repository's)."""
+
+    name = "report"
+    profile: str = setting(REQUIRED, _PROFILE_HELP, choices=PROFILES)
+    readme: bool = setting(False, "also update README.md's results")
+    wall_seconds: float | None = setting(
+        None,
+        "record S as the wall time of the `make reproduce` that made these results "
+        "(results/PROFILE/reproduce.json)",
         metavar="S",
-        help="record S as the wall time of the `make reproduce` that made these "
-        "results (results/PROFILE/reproduce.json)",
     )
-    rp.add_argument(
-        "--backend",
-        default="local",
-        choices=list(BACKENDS),
-        help="the backend of that `make reproduce` (with --wall-seconds)",
+    backend: str = setting(
+        "local", "the backend of that `make reproduce` (with --wall-seconds)", choices=BACKENDS
     )
-    rp.set_defaults(run=_report_cmd)
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.wall_seconds is not None and not self.wall_seconds >= 0:  # NaN fails too
+            raise GcdtError(f"--wall-seconds must be >= 0, got {self.wall_seconds}")
 
-def _report_cmd(args: argparse.Namespace) -> int:
-    from gcdt.experiments import get_profile
-    from gcdt.paths import REPO_ROOT
-    from gcdt.report import record_reproduction, update_readme, write_report
+    def run(self, command: str) -> int:
+        from gcdt.experiments import get_profile
+        from gcdt.paths import REPO_ROOT
+        from gcdt.report import record_reproduction, update_readme, write_report
 
-    measured_at = dt.datetime.now(dt.UTC)  # when make measured --wall-seconds, near enough
-    profile = get_profile(args.profile)
-    if args.wall_seconds is not None and not args.wall_seconds >= 0:  # before writing anything
-        raise GcdtError(f"--wall-seconds must be >= 0, got {args.wall_seconds}")
-    written = write_report(profile)
-    if args.wall_seconds is not None:
-        written.append(
-            record_reproduction(profile, args.wall_seconds, args.backend, measured_at=measured_at)
-        )
-    for path in written:
-        print(path.relative_to(REPO_ROOT) if path.is_relative_to(REPO_ROOT) else path)
-    if args.readme:
-        update_readme(profile, REPO_ROOT / "README.md")
-        print("README.md")
-    return 0
+        measured_at = dt.datetime.now(dt.UTC)  # when make measured --wall-seconds, near enough
+        profile = get_profile(self.profile)
+        written = write_report(profile)
+        if self.wall_seconds is not None:
+            wall, backend = self.wall_seconds, self.backend
+            written.append(record_reproduction(profile, wall, backend, measured_at=measured_at))
+        for path in written:
+            print(path.relative_to(REPO_ROOT) if path.is_relative_to(REPO_ROOT) else path)
+        if self.readme:
+            update_readme(profile, REPO_ROOT / "README.md")
+            print("README.md")
+        return 0
 
 
 def _reproduction_dir(given: Path | None) -> Path:
@@ -793,76 +652,110 @@ def _reproduction_dir(given: Path | None) -> Path:
     return folder
 
 
-def _compare_parser(sub: argparse._SubParsersAction) -> None:
-    cmp = sub.add_parser(
-        "compare",
-        help="check a reproduction against the published results",
-        description="For every Table 1 cell, ablation cell and Fig. 3/4 point: the published "
-        "value and its 95 % interval, yours, the difference, and whether yours lies inside. "
-        "Writes results/PROFILE/reproduction_check.{csv,md} under --ours.",
+_REPRODUCTION_HELP = "the reproduction's folder (default: $GCDT_OUTPUTS, else artifacts/reproduce)"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Compare(_Command):
+    """check a reproduction against the published results
+
+    For every Table 1 cell, ablation cell and Fig. 3/4 point: the published value and its 95 %
+    interval, yours, the difference, and whether yours lies inside. Writes
+    results/PROFILE/reproduction_check.{csv,md} under --ours."""
+
+    name = "compare"
+    profile: str = setting(REQUIRED, _PROFILE_HELP, choices=PROFILES)
+    ours: Path | None = setting(
+        None, _REPRODUCTION_HELP + ", holding results/PROFILE/runs/", metavar="DIR"
     )
-    cmp.add_argument("--profile", required=True, choices=list(PROFILES))
-    cmp.add_argument(
-        "--ours",
-        type=Path,
-        metavar="DIR",
-        help="the reproduction's folder, "
-        "holding results/PROFILE/runs/ (default: $GCDT_OUTPUTS, else "
-        "artifacts/reproduce)",
+
+    def run(self, command: str) -> int:
+        from gcdt.experiments import get_profile
+        from gcdt.report.reproduction import write_check
+
+        text, path = write_check(get_profile(self.profile), _reproduction_dir(self.ours))
+        print(text.rstrip())
+        if path is not None:
+            print(f"\n(written to {path})")
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class Publish(_Command):
+    """(maintainers) make a finished reproduction the published results
+
+    Mirror results/PROFILE/ and figures/PROFILE/ of a finished reproduction into the
+    repository's; unchanged files are left untouched."""
+
+    name = "publish"
+    profile: str = setting(REQUIRED, _PROFILE_HELP, choices=PROFILES)
+    source: Path | None = setting(None, _REPRODUCTION_HELP, flag="--from", metavar="DIR")
+
+    def run(self, command: str) -> int:
+        from gcdt.experiments import get_profile
+        from gcdt.paths import REPO_ROOT
+        from gcdt.report.reproduction import publish
+
+        written, removed = publish(get_profile(self.profile), _reproduction_dir(self.source))
+        for path in written:
+            print(path.relative_to(REPO_ROOT))
+        for path in removed:
+            print(f"removed {path.relative_to(REPO_ROOT)}")
+        print(f"published {self.profile}: {len(written)} file(s) written, {len(removed)} removed")
+        return 0
+
+
+COMMANDS: tuple[type[_Command], ...] = (
+    Evaluate,
+    Rollout,
+    Collect,
+    DatasetInfo,
+    DatasetMix,
+    DatasetSubset,
+    DatasetExportMinari,
+    DatasetImportMinari,
+    DatasetImportAuthors,
+    Train,
+    TQCTrain,
+    Sweep,
+    Report,
+    Compare,
+    Publish,
+)
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="gcdt",
+        description="Goal-Conditioned Decision Transformer on panda-gym: datasets and evaluation.",
     )
-    cmp.set_defaults(run=_compare)
-
-
-def _compare(args: argparse.Namespace) -> int:
-    from gcdt.experiments import get_profile
-    from gcdt.report.reproduction import write_check
-
-    text, path = write_check(get_profile(args.profile), _reproduction_dir(args.ours))
-    print(text.rstrip())
-    if path is not None:
-        print(f"\n(written to {path})")
-    return 0
-
-
-def _publish_parser(sub: argparse._SubParsersAction) -> None:
-    pb = sub.add_parser(
-        "publish",
-        help="(maintainers) make a finished reproduction the published results",
-        description="Mirror results/PROFILE/ and figures/PROFILE/ of a finished reproduction "
-        "into the repository's; unchanged files are left untouched.",
-    )
-    pb.add_argument("--profile", required=True, choices=list(PROFILES))
-    pb.add_argument(
-        "--from",
-        dest="source",
-        type=Path,
-        metavar="DIR",
-        help="the reproduction's folder (default: $GCDT_OUTPUTS, else artifacts/reproduce)",
-    )
-    pb.set_defaults(run=_publish)
-
-
-def _publish(args: argparse.Namespace) -> int:
-    from gcdt.experiments import get_profile
-    from gcdt.paths import REPO_ROOT
-    from gcdt.report.reproduction import publish
-
-    written, removed = publish(get_profile(args.profile), _reproduction_dir(args.source))
-    for path in written:
-        print(path.relative_to(REPO_ROOT))
-    for path in removed:
-        print(f"removed {path.relative_to(REPO_ROOT)}")
-    print(f"published {args.profile}: {len(written)} file(s) written, {len(removed)} removed")
-    return 0
+    subparsers = {"": parser.add_subparsers(dest="command", required=True, parser_class=_Parser)}
+    for command in COMMANDS:
+        group, _, name = command.name.rpartition(" ")
+        if group not in subparsers:
+            grouped = subparsers[""].add_parser(group, help=GROUPS[group])
+            subparsers[group] = grouped.add_subparsers(
+                dest=f"{group}_command", required=True, parser_class=_Parser
+            )
+        doc = inspect.cleandoc(command.__doc__ or "")
+        subparsers[group].add_parser(
+            name,
+            help=doc.splitlines()[0],
+            description=doc,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+            arguments=lambda p, c=command: add_options(p, c, c.names()),
+        ).set_defaults(options=command)
+    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `gcdt` console script; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = _build_parser().parse_args(argv)
-    args.argv = argv  # recorded in result files: the command that made them
+    parsed = vars(_build_parser().parse_args(argv))
+    command = parsed["options"]
     try:
-        return args.run(args)
+        options = from_options(parsed, command, command.names())
+        return options.run(" ".join(["gcdt", *argv]))  # recorded in the files it writes
     except GcdtError as err:
         print(f"gcdt: error: {err}", file=sys.stderr)
         return USAGE_ERROR

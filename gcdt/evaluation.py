@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from gcdt import paper
 from gcdt.envs import goal_distance
 from gcdt.errors import GcdtError
 from gcdt.paths import write_if_changed
@@ -29,8 +30,6 @@ from gcdt.regions import GoalRegion, check_goal
 from gcdt.rollout import VectorRollout, VectorStep
 from gcdt.settings import check_minimums, setting
 
-DEFAULT_TIMESTEPS = 10_000  # the paper's evaluation budget per (run, seed)
-
 
 @dataclass(frozen=True)
 class EvaluationConfig:
@@ -38,11 +37,15 @@ class EvaluationConfig:
     field as a keyword, and `gcdt evaluate` as an option."""
 
     timesteps: int | None = setting(
-        None, f"env steps in total (default {DEFAULT_TIMESTEPS})", minimum=1
+        None, f"env steps in total (default {paper.EVAL_TIMESTEPS:,})", minimum=1
     )
     episodes: int | None = setting(None, "run this many whole episodes", minimum=1)
     n_envs: int = setting(
-        1, "envs stepped side by side, each in a process of its own unless in_process", minimum=1
+        1,
+        "envs stepped side by side, each in a process of its own unless in_process",
+        minimum=1,
+        flag="--envs",
+        metavar="N",
     )
     # Env processes pay only where there are idle cores to step them on; on a busy core their
     # messages cost more than they save (the grid gives each run one core).
@@ -61,7 +64,7 @@ class EvaluationConfig:
     def total_timesteps(self) -> int | None:
         """The env steps to run: `timesteps`, else the paper's budget unless `episodes`."""
         if self.timesteps is None and self.episodes is None:
-            return DEFAULT_TIMESTEPS
+            return paper.EVAL_TIMESTEPS
         return self.timesteps
 
 

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from gcdt import paper
 from gcdt.envs import TASKS, get_task, goal_range
 from gcdt.errors import GcdtError
 from gcdt.evaluation import Recording, record_rollout
@@ -76,7 +77,7 @@ def explore(
     checkpoint: str | Path,
     task: str,
     goal: np.ndarray,
-    target_return: float = 0.0,
+    target_return: float = paper.TARGET_RETURN,
     *,
     seed: int = 0,
     size: int = 200,

@@ -1,8 +1,8 @@
 """One trainer for every method: the (GC-)DT and BC, from an offline `Dataset`.
 
-The authors' recipe (their public code): AdamW (lr 1e-4, weight decay 1e-4), linear warm-up over
-10 % of the steps then linear decay, gradient-norm clip 0.25, batch 64, returns-to-go divided
-by 100, states z-normalised with the dataset's mean and std, K-step windows left-padded.
+The authors' recipe (their public code; its numbers are `gcdt.paper`'s): AdamW, linear warm-up
+then linear decay, a gradient-norm clip, returns-to-go divided by a scale, states z-normalised
+with the dataset's mean and std, K-step windows left-padded.
 Windows start at a transition drawn uniformly from the whole dataset, which is exactly the
 authors' "episode in proportion to its length, then a uniform start within it".
 
@@ -28,6 +28,7 @@ from typing import Any, Literal, get_args
 import numpy as np
 import torch
 
+from gcdt import paper
 from gcdt.checkpoint import (
     CHECKPOINT_FORMAT,
     CHECKPOINT_NAME,
@@ -50,7 +51,6 @@ from gcdt.settings import check_minimums, setting
 Method = Literal["dt", "bc"]
 METHODS: tuple[str, ...] = get_args(Method)
 LOG_NAME = "train_log.csv"
-PAPER_EPOCHS = 120
 #: TrainConfig fields that only decide when checkpoints are written, not what is learnt:
 #: a run may be resumed with other values.
 SCHEDULING_FIELDS = ("checkpoint_every", "checkpoint_seconds")
@@ -72,15 +72,19 @@ class TrainConfig:
     epochs: int | None = setting(
         None,
         "the authors' epochs of ceil(#episodes / batch size) steps; "
-        f"neither steps nor epochs given: {PAPER_EPOCHS} epochs",
+        f"neither steps nor epochs given: {paper.EPOCHS} epochs",
         minimum=1,
     )
-    batch_size: int = setting(64, "windows (DT) or transitions (BC) per step", minimum=1)
-    lr: float = setting(1e-4, "AdamW peak learning rate")
-    weight_decay: float = setting(1e-4, "AdamW weight decay")
-    warmup_fraction: float = setting(0.1, "share of the steps of linear warm-up, then decay")
-    grad_clip: float = setting(0.25, "gradient-norm clip")
-    return_scale: float = setting(100.0, "returns-to-go are divided by this")
+    batch_size: int = setting(
+        paper.BATCH_SIZE, "windows (DT) or transitions (BC) per step", minimum=1
+    )
+    lr: float = setting(paper.LEARNING_RATE, "AdamW peak learning rate")
+    weight_decay: float = setting(paper.WEIGHT_DECAY, "AdamW weight decay")
+    warmup_fraction: float = setting(
+        paper.WARMUP_FRACTION, "share of the steps of linear warm-up, then decay"
+    )
+    grad_clip: float = setting(paper.GRAD_CLIP, "gradient-norm clip")
+    return_scale: float = setting(paper.RETURN_SCALE, "returns-to-go are divided by this")
     context: int = setting(
         _MODEL_DEFAULTS["context"],
         "K, the steps a DT sees (return-to-go, state, action)",
@@ -127,7 +131,7 @@ class TrainConfig:
     def total_steps(self, n_episodes: int) -> int:
         if self.steps is not None:
             return self.steps
-        return (self.epochs or PAPER_EPOCHS) * math.ceil(n_episodes / self.batch_size)
+        return (self.epochs or paper.EPOCHS) * math.ceil(n_episodes / self.batch_size)
 
     def model_config(self, state_dim: int, action_dim: int) -> dict[str, Any]:
         """The config of the model to train, as a checkpoint stores it: `DTConfig` or
@@ -222,7 +226,7 @@ def keep_freed_memory() -> bool:
 
 def make_optimizer(model: torch.nn.Module, cfg: TrainConfig) -> torch.optim.Optimizer:
     """The authors' AdamW; fused (one kernel for all parameters, same update rule), which
-    on CPU cuts the optimiser's share of a DT step from 4 % to 1 %."""
+    on CPU shrinks the optimiser's share of a DT step."""
     return torch.optim.AdamW(
         model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, fused=True
     )

@@ -62,19 +62,19 @@ def test_evaluate_json_last_line(capsys):
         ),
         (
             [*RANDOM_REACH, "--episodes", "0"],
-            "argument --episodes: expected a positive integer, got 0",
+            "episodes must be a positive integer, got 0",
         ),
         (
             [*RANDOM_REACH, "--timesteps", "-5"],
-            "argument --timesteps: expected a positive integer, got -5",
+            "timesteps must be a positive integer, got -5",
         ),
         (
             [*RANDOM_REACH, "--envs", "0"],
-            "argument --envs: expected a positive integer, got 0",
+            "n_envs must be a positive integer, got 0",
         ),
         (
             [*RANDOM_REACH, "--episodes", "2", "--timesteps", "5"],
-            "not allowed with argument",
+            "give either timesteps or episodes, not both",
         ),
         (
             [*RANDOM_REACH, "--target-return", "-5"],
@@ -288,7 +288,7 @@ def data_files(tmp_path, make_dataset):
                 "--out",
                 "{d}/new.npz",
             ],
-            "argument --transitions: expected a positive integer, got 0",
+            "transitions must be a positive integer, got 0",
         ),
         (
             [
@@ -322,7 +322,7 @@ def data_files(tmp_path, make_dataset):
                 "--out",
                 "{d}/new.npz",
             ],
-            "argument --ratio: expected a number in [0, 1], got 1.5",
+            "expert ratio must be within [0, 1], got 1.5",
         ),
         (
             [

@@ -225,12 +225,12 @@ def test_foreign_tqc_zip_for_its_own_task_is_a_policy(foreign_zips):
     ("extra", "message"),
     [
         (["--config", "gpu"], "argument --config: invalid choice: 'gpu'"),
-        (["--steps", "0"], "expected a positive integer, got 0"),
-        (["--steps", "-5"], "expected a positive integer, got -5"),
-        (["--eval-episodes", "0"], "expected a positive integer, got 0"),
+        (["--steps", "0"], "steps must be an integer >= 1, got 0"),
+        (["--steps", "-5"], "steps must be an integer >= 1, got -5"),
+        (["--eval-episodes", "0"], "eval_episodes must be a positive integer, got 0"),
         (["--backend", "tf"], "--backend: invalid choice: 'tf' (choose from 'sb3', 'sbx')"),
-        (["--n-envs", "0"], "expected a positive integer, got 0"),
-        (["--stop-at", "1.5"], "expected a success rate in (0, 1], got 1.5"),
+        (["--n-envs", "0"], "n_envs must be an integer >= 1, got 0"),
+        (["--stop-at", "1.5"], "stop_at is a success rate in (0, 1], got 1.5"),
         (["--device", "cuda"], "the sbx backend runs on JAX's default device"),
     ],
 )

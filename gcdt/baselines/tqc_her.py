@@ -3,8 +3,9 @@
 TQC with Stable-Baselines3's `HerReplayBuffer` on panda-gym, in one of two implementations by
 the same maintainers (the `backend`): `sb3` is sb3-contrib's PyTorch TQC, the loop
 rl-baselines3-zoo runs; `sbx` is SBX's JAX TQC, whose whole gradient step is one compiled
-function, with its critic target's sort replaced by a mask (`gcdt/baselines/sbx_tqc.py`):
-2.7x the env steps/s on 2 CPU cores (`python benchmarks/tqc_her.py throughput`). `n_envs`
+function, with its critic target's sort replaced by a mask (`gcdt/baselines/sbx_tqc.py`);
+their speeds are measured by `python benchmarks/tqc_her.py throughput`
+(results/bench/tqc_her_throughput.json). `n_envs`
 envs step side by side and each loop iteration takes `n_envs` gradient steps, so the updates
 per env step stay the zoo's. The hyperparameters live in `tqc_her.yaml` next to this file
 (`paper` = rl-baselines3-zoo's her-defaults); a config or a profile may change budget and loop
@@ -45,6 +46,7 @@ from gcdt.envs import check_reward, get_task
 from gcdt.errors import GcdtError
 from gcdt.paths import atomic_write, write_json_atomic
 from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_now
+from gcdt.settings import check_minimums, setting
 
 CONFIG_FILE = Path(__file__).with_name("tqc_her.yaml")
 #: Values a config other than `paper`, or a profile, may change: the compute budget...
@@ -180,6 +182,35 @@ def load_tqc_config(name: str, task: str) -> TQCConfig:
 # Training
 
 
+@dataclass(frozen=True, kw_only=True)
+class TQCRunSettings:
+    """How a TQC+HER run is seeded, measured and checkpointed, besides its `TQCConfig`:
+    `train_tqc` takes each field as a keyword, and `gcdt tqc train` as an option."""
+
+    seed: int = setting(0, "seeds the agent, its envs and its evaluations", minimum=0)
+    eval_every: int | None = setting(
+        None, "env steps between evaluations (default: 10 per run)", minimum=1, metavar="N"
+    )
+    eval_episodes: int = setting(20, "episodes per evaluation", minimum=1, metavar="N")
+    stop_at: float | None = setting(
+        None,
+        "stop at the first evaluation whose success rate reaches RATE (0-1]",
+        metavar="RATE",
+    )
+    device: str = setting("auto", "auto (CUDA when present), cpu or cuda")
+    checkpoint_seconds: float = setting(
+        CHECKPOINT_SECONDS, "seconds between checkpoints (0: every loop iteration)", metavar="S"
+    )
+
+    def __post_init__(self) -> None:
+        check_minimums(self)
+        if self.stop_at is not None and not 0 < self.stop_at <= 1:  # NaN fails too
+            raise GcdtError(f"stop_at is a success rate in (0, 1], got {self.stop_at!r}")
+        seconds = self.checkpoint_seconds
+        if isinstance(seconds, bool) or not isinstance(seconds, int | float) or not seconds >= 0:
+            raise GcdtError(f"checkpoint_seconds must be >= 0, got {seconds!r}")
+
+
 @dataclass(frozen=True)
 class TQCResult:
     """Where a run's files are and what it measured."""
@@ -207,38 +238,25 @@ def train_tqc(
     cfg: TQCConfig,
     out_dir: str | Path,
     *,
-    seed: int = 0,
-    eval_every: int | None = None,
-    eval_episodes: int = 20,
-    device: str = "auto",
-    stop_at: float | None = None,
     progress: bool = True,
     command: str | None = None,
     resume: bool = False,
-    checkpoint_seconds: float = CHECKPOINT_SECONDS,
+    **settings: Any,
 ) -> TQCResult:
     """Train TQC+HER on `task` with `reward`; write the run's files to `out_dir`.
 
-    The current policy is evaluated with `gcdt.evaluation.evaluate` on `eval_episodes`
-    episodes every `eval_every` env steps (default: 10 times per run) and once at the end;
-    with `stop_at`, training ends at the first evaluation whose success rate reaches it.
-    A checkpoint is written every `checkpoint_seconds` (0: every loop iteration); with
-    `resume`, the run in `out_dir` continues from its checkpoint, which must be of the same
-    task, reward, seed, config and evaluation.
+    `settings` are `TQCRunSettings`' fields: the seed, the periodic evaluation (the current
+    policy measured with `gcdt.evaluation.evaluate`, and once at the end), `stop_at`, the
+    device and the checkpoint cadence. With `resume`, the run in `out_dir` continues from its
+    checkpoint, which must be of the same task, reward, seed, config and evaluation.
     """
     spec = get_task(task)
     check_reward(reward)
     if cfg.task != spec.name:
         raise GcdtError(f"the TQC+HER config is for task {cfg.task!r}, not {spec.name!r}")
-    eval_every = eval_every if eval_every is not None else max(cfg.steps // 10, 1)
-    for name, value in (("eval_every", eval_every), ("eval_episodes", eval_episodes)):
-        _budget_value(name, value)
-    if not isinstance(seed, int) or seed < 0:
-        raise GcdtError(f"seed must be a non-negative integer, got {seed!r}")
-    if stop_at is not None and not 0 < stop_at <= 1:
-        raise GcdtError(f"stop_at is a success rate in (0, 1], got {stop_at!r}")
-    if not (isinstance(checkpoint_seconds, int | float) and checkpoint_seconds >= 0):
-        raise GcdtError(f"checkpoint_seconds must be >= 0, got {checkpoint_seconds!r}")
+    run = TQCRunSettings(**settings)
+    seed, eval_episodes, stop_at, device = run.seed, run.eval_episodes, run.stop_at, run.device
+    eval_every = run.eval_every if run.eval_every is not None else max(cfg.steps // 10, 1)
     out = Path(out_dir)
     identity = {
         "task": spec.name,
@@ -309,7 +327,7 @@ def train_tqc(
             cfg.steps - model.num_timesteps,
             callback=[
                 evaluator.callback(cfg.steps, cfg.learning_starts, progress),
-                _checkpoint_callback(checkpoint, checkpoint_seconds),
+                _checkpoint_callback(checkpoint, run.checkpoint_seconds),
             ],
             reset_num_timesteps=not resume,
         )

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from gcdt import paper
 from gcdt.baselines.tqc_her import TQCConfig, load_tqc_config
 from gcdt.errors import GcdtError
 from gcdt.experiments.profiles import EVAL_SEED_STEP, Profile, target_seeds
@@ -159,14 +160,15 @@ class RunSpec:
     reward: str
     seed: int
     data: DataSpec | None  # None for the online TQC+HER baseline
-    train_steps: int | None  # offline gradient steps; None: the authors' 120 epochs
+    train_steps: int | None  # offline gradient steps; None: the paper's epochs
     learning_rate: float | None  # offline training's peak learning rate; None for `tqc`
     tqc: TQCSpec | None
     eval_timesteps: int
     eval_seeds: tuple[int, ...]
     eval_envs: int
     threads: int  # torch threads; part of the key since float results may depend on it
-    target_return: float = 0.0  # a DT's return-to-go at each evaluation episode's start
+    #: A DT's return-to-go at each evaluation episode's start.
+    target_return: float = paper.TARGET_RETURN
     eval_region: str | None = None  # the goal region evaluated in (None: the whole range)
 
     def train_config(self) -> TrainConfig:
@@ -324,7 +326,7 @@ def bc_steps(profile: Profile, task: str, data: DataSpec) -> int | None:
     """BC's gradient steps under the profile's BC budget rule (see `BC_BUDGETS`)."""
     if profile.bc_budget == "steps":
         return None if profile.train_steps is None else profile.train_steps[task]
-    from gcdt.training import PAPER_EPOCHS, TrainConfig  # torch: not for `gcdt --help`
+    from gcdt.training import TrainConfig  # torch: not for `gcdt --help`
 
     # The context K and the batch of offline training: the paper's, which the grid keeps.
     context, batch = TrainConfig.context, TrainConfig.batch_size
@@ -333,7 +335,7 @@ def bc_steps(profile: Profile, task: str, data: DataSpec) -> int | None:
     # is the same number of epochs over transitions as the DT's over episodes.
     if profile.train_steps is not None:
         return profile.train_steps[task] * context
-    return PAPER_EPOCHS * math.ceil(data.size / batch)
+    return paper.EPOCHS * math.ceil(data.size / batch)
 
 
 def run_spec(
@@ -343,7 +345,7 @@ def run_spec(
     reward: str,
     seed: int,
     data: DataSpec | None,
-    target_return: float = 0.0,
+    target_return: float = paper.TARGET_RETURN,
     eval_seeds: tuple[int, ...] | None = None,
     eval_region: str | None = None,
 ) -> RunSpec:

@@ -1,10 +1,11 @@
 """Scale profiles: every number that sets the size of the experiment grid, in one place.
 
-`paper` is the paper's protocol; `standard` a real, reduced reproduction on a 2-core CPU:
-Table 1, Fig. 3 and Fig. 4 on every task, and the return-target and goal-generalisation studies
-(27 h of work there, about 14 h); `quick` is standard's Table 1 at a quarter of its data, in one
-sitting (72 min on a fresh clone there); `smoke` runs every stage in minutes and its numbers
-mean nothing.
+`paper` is the paper's protocol (`gcdt.paper`); `standard` a real, reduced reproduction on a
+2-core CPU: Table 1, Fig. 3 and Fig. 4 on every task, and the return-target and
+goal-generalisation studies; `quick` is standard's Table 1 at a quarter of its data, in one
+sitting; `smoke` runs every stage in minutes and its numbers mean nothing. What each took is
+measured, not written here: `gcdt sweep --dry-run` estimates it from the published runs, and
+results/PROFILE/reproduce.json records a `make reproduce`.
 `deviations(profile)` is the one text that lists how a profile differs from the paper; the
 README and the reports print it rather than restating it.
 """
@@ -16,6 +17,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from gcdt import paper
 from gcdt.baselines.tqc_her import BACKENDS, load_tqc_config
 from gcdt.data.collect import LABELS
 from gcdt.envs import REWARDS
@@ -59,7 +61,7 @@ class Profile:
 
     name: str
     description: str
-    seeds: tuple[int, ...] = (0, 1, 2)  # training seeds per grid cell ("3 random seeds")
+    seeds: tuple[int, ...] = paper.SEEDS  # training seeds per grid cell
     # Data: the expert that collects expert trajectories ("tqc": converged TQC+HER agents, as
     # in the paper; "scripted": the state-machine experts of gcdt.policies.scripted).
     expert: str = "tqc"
@@ -74,21 +76,21 @@ class Profile:
     # Per task, a published TQC+HER zip (path from the repository root) that collects that
     # task's expert data instead of `expert`, e.g. results/experts/tqc_push_sparse/model.zip.
     expert_agents: dict[str, str] = field(default_factory=dict)
-    dataset_size: int = 1_000_000  # transitions of the full expert data (Table 1, RQ5)
+    dataset_size: int = paper.DATASET_SIZE  # transitions of the full expert data (Table 1, RQ5)
     data_seed: int = 0  # seed of every collection, subset and mixture
     collect_envs: int = 1  # env processes per collection
-    rq4_sizes: tuple[int, ...] = (100_000, 250_000, 500_000, 750_000, 1_000_000)
-    rq5_ratios: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
+    rq4_sizes: tuple[int, ...] = paper.RQ4_SIZES
+    rq5_ratios: tuple[float, ...] = paper.RQ5_RATIOS
     # Offline training (GC-DT, DT ablations, BC): gradient steps per task, or None for the
-    # authors' 120 epochs of ceil(#episodes / 64) steps.
+    # paper's epochs of ceil(#episodes / batch size) steps.
     train_steps: dict[str, int] | None = None
     # BC's budget against the DT's (BC_BUDGETS): "samples" gives it as many state-action
     # samples as the DT learns from, "steps" as many gradient steps.
     bc_budget: str = "samples"
-    # AdamW peak learning rate of offline training (the authors' 1e-4).
-    learning_rate: float = 1e-4
-    # Evaluation of every trained agent: env steps per evaluation seed (the paper's 10,000).
-    eval_timesteps: int = 10_000
+    # AdamW peak learning rate of offline training.
+    learning_rate: float = paper.LEARNING_RATE
+    # Evaluation of every trained agent: env steps per evaluation seed.
+    eval_timesteps: int = paper.EVAL_TIMESTEPS
     eval_seeds: int = 1  # evaluations per run, seeded run_seed, run_seed + 100, ...
     eval_envs: int = 1
     # TQC+HER: the tqc_her.yaml config, online steps of the Table-1 baseline (None: as many as
@@ -186,29 +188,24 @@ STANDARD = dataclasses.replace(
     "RQ5) on every task with sparse rewards, and two studies beyond the paper (the return "
     "target, goals outside the training region); 27 h of work, about 14 h on a 2-core CPU",
     expert="scripted",
-    # Noisy demonstrations (as in DART, Laskey et al. 2017), the executed action as label.
-    # Chosen on held-out seeds before the grid ran (results/quick_checks/README.md): GC-DT on
-    # PickAndPlace sparse succeeds in 98.1 % of its episodes with this data, 90.3 % with
-    # noise-free data and 92.9 % with clean (DART) labels; on Push the labels differ by less
-    # than the evaluation's noise (95.4 / 96.9 %). The noise-free run of an earlier profile
-    # traced the gap to the return conditioning: a return-to-go near 0 marks the carrying
-    # phase, and at target 0 the policy shut the gripper before grasping.
+    # Noisy demonstrations (as in DART, Laskey et al. 2017), the executed action as label:
+    # chosen against noise-free data and clean (DART) labels on held-out seeds before the grid
+    # ran (results/quick_checks/README.md, with the numbers). Noise-free scripted data left
+    # GC-DT's return conditioning ambiguous: a return-to-go near 0 marks the carrying phase, and
+    # at target 0 the policy shut the gripper before grasping.
     expert_noise=0.2,
     dataset_size=20_000,
     rq4_sizes=(5_000, 10_000, 20_000),
     rq5_ratios=(0.0, 0.25, 0.5, 0.75, 1.0),
-    # A few thousand steps at 10x the authors' learning rate: on 20k scripted transitions
-    # GC-DT at lr 1e-3 reaches on Push 87 % after 1,000 steps and 98 % after 3,000, where lr
-    # 1e-4 needs 5,000 steps for 96 % (2 cores, 1 thread, ~0.3 s per step).
+    # A few thousand steps at 10x the paper's learning rate, which at these budgets learns
+    # what the paper's rate needs more steps for (results/quick_checks/README.md).
     train_steps={"reach": 400, "push": 2500, "pick_and_place": 4500},
     learning_rate=1e-3,
-    # The paper's 10,000-step evaluation: 2,000 steps (~40 PickAndPlace episodes of the slower
-    # experts then) left a GC-DT success rate 11 points below its 10,000-step value. Four envs
-    # per run batch the DT's forward passes (326 against 229 env steps/s on one thread).
+    # The paper's evaluation budget, on four envs per run that batch the DT's forward passes
+    # (their speed: docs/experiments.md, from `benchmarks/evaluator_throughput.py`).
     eval_envs=4,
     # TQC+HER in every Table 1 cell, for as many online steps as the expert data has
-    # transitions (20,000: 8-13 minutes each on one core of a 2-core CPU beside another run,
-    # its learning-curve evaluations included; results/standard/runs/).
+    # transitions (what each run took: its result in results/standard/runs/).
     tqc_config="cpu",
     table1=Scope(),
     rq4=Scope(rewards=("sparse",)),
@@ -223,12 +220,10 @@ QUICK = dataclasses.replace(
     name="quick",
     description="Table 1 whole (3 seeds) at a quarter of standard's data and budgets, in one "
     "sitting: under 90 minutes on a 2-core CPU",
-    # Every Table 1 cell, method and seed of `standard` at about a quarter of its work (2.2
-    # against 8.1 h): TQC+HER's online steps follow the data's size, and the offline budgets
-    # shrink with it. Its published run (results/quick/, 72 min on a fresh clone) puts GC-DT
-    # sparse at 100 / 76.2 / 86.6 % (Reach / Push / PickAndPlace) where standard has 100 /
-    # 95.7 / 94.9: this profile checks the pipeline and the comparisons' direction, `standard`
-    # holds the numbers to quote.
+    # Every Table 1 cell, method and seed of `standard` at about a quarter of its work:
+    # TQC+HER's online steps follow the data's size, and the offline budgets shrink with it.
+    # This profile checks the pipeline and the comparisons' direction (its published run:
+    # results/quick/); `standard` holds the numbers to quote.
     dataset_size=5_000,
     train_steps={"reach": 300, "push": 800, "pick_and_place": 1200},
     # 3,000 env steps per run: 60 episodes of a policy that always fails (50 steps each) to a
@@ -324,7 +319,8 @@ def deviations(profile: Profile) -> list[str]:
     if p.train_steps != paper.train_steps:
         steps = ", ".join(f"{t} {n:,}" for t, n in (p.train_steps or {}).items())
         out.append(
-            f"offline training for a fixed number of gradient steps ({steps}) instead of 120 epochs"
+            f"offline training for a fixed number of gradient steps ({steps}) instead of "
+            f"{paper.EPOCHS} epochs"
         )
     if p.bc_budget != paper.bc_budget:
         out.append(

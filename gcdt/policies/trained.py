@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from gcdt import paper
 from gcdt.checkpoint import build_model, load_checkpoint, method_label
 from gcdt.device import resolve_device
 from gcdt.envs import goal_state
@@ -36,7 +37,7 @@ class TrainedPolicy(Policy):
         checkpoint: str | Path | dict[str, Any],
         task: str | None = None,
         *,
-        target_return: float = 0.0,
+        target_return: float = paper.TARGET_RETURN,
         device: str = "auto",
     ) -> None:
         ckpt = checkpoint if isinstance(checkpoint, dict) else load_checkpoint(checkpoint)

@@ -178,6 +178,30 @@ def test_evaluate_options_are_evaluationconfig_fields():
     assert (args.n_envs, args.episodes, args.timesteps, args.seed) == (3, 2, None, 7)
 
 
+def test_tqc_train_options_are_tqcrunsettings_fields():
+    """`gcdt tqc train` has an option per `TQCRunSettings` field, with the field's default."""
+    from gcdt.baselines.tqc_her import TQCRunSettings
+    from gcdt.cli import _build_parser
+
+    argv = ["tqc", "train", "--task", "reach", "--reward", "sparse", "--out", "o"]
+    args = _build_parser().parse_args(argv)
+    fields = dataclasses.fields(TQCRunSettings)
+    assert TQCRunSettings(**{f.name: getattr(args, f.name) for f in fields}) == TQCRunSettings()
+    args = _build_parser().parse_args([*argv, "--stop-at", "0.5", "--eval-every", "7"])
+    assert (args.stop_at, args.eval_every, args.eval_episodes) == (0.5, 7, 20)
+
+
+def test_help_does_not_import_torch():
+    code = (
+        "import sys; from gcdt.cli import main\n"
+        "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+        "print('torch' in sys.modules, file=sys.stderr)"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.stderr.strip() == "False", proc.stderr
+    assert "tqc" in proc.stdout and "sweep" in proc.stdout
+
+
 def test_only_train_imports_torch():
     """The other commands, and `gcdt --help`, never wait for torch: `gcdt train` adds its
     options (from `TrainConfig`) when it parses."""

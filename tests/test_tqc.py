@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import re
 import shutil
 
 import numpy as np
@@ -239,6 +240,23 @@ def test_bad_train_input_exit_2_nothing_written(assert_usage_error, tmp_path, ex
     argv = ["tqc", "train", "--task", "reach", "--reward", "sparse", "--out", str(out), *extra]
     assert_usage_error(argv, message)
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ({"stop_at": 0.0}, "stop_at is a success rate in (0, 1], got 0.0"),
+        ({"stop_at": float("nan")}, "stop_at is a success rate in (0, 1], got nan"),
+        ({"checkpoint_seconds": -1.0}, "checkpoint_seconds must be >= 0, got -1.0"),
+        ({"seed": -1}, "seed must be a non-negative integer, got -1"),
+        ({"eval_every": 0}, "eval_every must be a positive integer, got 0"),
+    ],
+)
+def test_run_settings_refuse_bad_values_before_anything_runs(tmp_path, settings, message):
+    cfg = load_tqc_config("cpu", "reach")
+    with pytest.raises(GcdtError, match=re.escape(message)):
+        train_tqc("reach", "sparse", cfg, tmp_path / "run", progress=False, **settings)
+    assert not (tmp_path / "run").exists()
 
 
 def test_train_refuses_a_folder_holding_a_run(assert_usage_error, push_run, tmp_path):

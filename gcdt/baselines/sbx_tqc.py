@@ -1,11 +1,11 @@
 """SBX's TQC with its critic update's sort replaced by a mask: the `sbx` backend's algorithm.
 
 TQC's critic target keeps the lowest `n_target_quantiles` of the critics' pooled next-state
-quantiles (it drops the top 2 per critic). SBX finds them with a full sort of every row; on
-XLA's CPU backend that sort costs ~1.3 ms of a ~12 ms gradient step (cpu config, batch 256,
-2 x 25 quantiles). The quantile Huber loss is a mean over (quantile, target) pairs, so the
-order of the targets never matters, only which ones are kept: `keep_lowest` marks them by
-removing the row maximum `n_drop` times (~0.2 ms) and the loss averages over the kept pairs.
+quantiles (it drops the top 2 per critic). SBX finds them with a full sort of every row,
+which XLA's CPU backend runs slowly (`python benchmarks/tqc_her.py throughput` measures the
+whole step). The quantile Huber loss is a mean over (quantile, target) pairs, so the order of
+the targets never matters, only which ones are kept: `keep_lowest` marks them by removing the
+row maximum `n_drop` times, and the loss averages over the kept pairs.
 Same targets, same loss, same gradients up to float rounding; everything else, and every
 saved zip, is SBX's own.
 """

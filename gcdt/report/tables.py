@@ -16,11 +16,12 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from gcdt.baselines.publish import AGENTS_DIR
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
 from gcdt.experiments.profiles import Profile
 from gcdt.experiments.store import RunStore
-from gcdt.paths import REPO_ROOT, results_dir
+from gcdt.paths import results_dir
 
 TASK_NAMES = {"reach": "Reach", "push": "Push", "pick_and_place": "PickAndPlace"}
 METHOD_NAMES = {
@@ -87,10 +88,6 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
             f"`gcdt sweep --profile {profile.name}` (or `make reproduce PROFILE={profile.name}`)"
         )
     return pd.DataFrame(rows)
-
-
-#: Published TQC+HER agents (`results/experts/tqc_<task>_<reward>/`), each with its curve.
-AGENTS_DIR = REPO_ROOT / "results" / "experts"
 
 
 def load_agent_curves(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:

@@ -228,3 +228,16 @@ def test_card_states_the_conventions(tiny, tmp_path):
     ):
         assert needle in text, needle
     assert "No profile has a manifest" in rel.card_text(tmp_path / "elsewhere")
+
+
+def test_published_manifest_and_card_are_current():
+    """The committed smoke manifest lists the datasets and recipes the code makes, and
+    docs/datasets.md is what `gcdt dataset card` writes from the committed manifests."""
+    manifest = rel.read_manifest(SMOKE, rel.REPO_ROOT)
+    smoke = rel.release(SMOKE)
+    assert [e["id"] for e in manifest["datasets"]] == list(smoke.bases)
+    assert [e["collection"]["data_key"] for e in manifest["datasets"]] == [
+        s.key() for s in smoke.bases.values()
+    ]
+    assert [d["data_key"] for d in manifest["derived"]] == [s.key() for s in smoke.derived]
+    assert rel.CARD.read_text() == rel.card_text()

@@ -629,8 +629,8 @@ build into a folder that holds another dataset under the same id.
   panda-gym v3 terminates an episode on success only and truncates it after 50 steps.
 - **State order.** gcdt's models read the state `[observation, desired_goal, achieved_goal]`
   (concatenated in that order), the paper's.
-- **Rewards.** The stored reward is the {RELEASE_REWARD} one (`-1` until the achieved goal is
-  within the task's distance threshold of the desired goal, then `0`). Sparse and dense
+- **Rewards.** The stored reward is the {RELEASE_REWARD} one: `-1` while the achieved goal is
+  farther than the task's distance threshold from the desired goal, `0` within it. Sparse and dense
   rewards are both recomputed from the stored goals: with `d` the distance from
   `achieved_goal` to `desired_goal` of the next observation, sparse is `-(d > threshold)` and
   dense is `-d`. Loading through gcdt checks the stored rewards against that computation and

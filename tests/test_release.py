@@ -137,6 +137,8 @@ def test_build_verify_train_and_refusals(tiny, tmp_path, capsys, monkeypatch):
     assert _hashes(tmp_path / "minari") == first
     assert main(["dataset", "verify", "smoke"]) == 0
     assert "verified 2 datasets" in capsys.readouterr().out
+    assert main(["dataset", "build", "--profile", "smoke"]) == 0  # built ones are read
+    assert _hashes(tmp_path / "minari") == first
 
     # gcdt train takes a Minari id; an unknown id is one line listing the known ones.
     out = tmp_path / "run"

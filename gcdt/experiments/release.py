@@ -96,11 +96,8 @@ def _region(text: str) -> str:
 def _expert(spec: DataSpec) -> str:
     if spec.expert == "tqc":  # a grid-trained agent: its config is part of the name unless paper's
         tqc = spec.expert_tqc
-        return (
-            "tqc"
-            if (tqc.config, tqc.steps, tqc.budget) == ("paper", None, ())
-            else (f"tqc-{tqc.key()[:8]}")
-        )
+        paper = (tqc.config, tqc.steps, tqc.budget) == ("paper", None, ())
+        return "tqc" if paper else f"tqc-{tqc.key()[:8]}"
     if spec.expert.startswith("tqc:"):  # a published agent, named by its content
         return f"tqc-{spec.expert_digest[:8]}"
     return spec.expert
@@ -301,7 +298,7 @@ def _reference(profile: Profile, spec: DataSpec, cache: dict) -> dict[str, Any]:
     return cache[key]
 
 
-def _card(profile: Profile, ident: str, spec: DataSpec, data: Dataset, refs: dict) -> Any:
+def _card(profile: Profile, spec: DataSpec, data: Dataset, refs: dict) -> Any:
     from gcdt.data.minari_io import MinariCard
 
     versions = package_versions(REQUIREMENTS)
@@ -356,24 +353,26 @@ def _build_one(
 
     import minari
 
-    from gcdt.data.minari_io import export_minari
+    from gcdt.data.minari_io import export_minari, import_minari
     from gcdt.experiments.artifacts import dataset
 
     spec, profile = rel.bases[ident], rel.profile
-    data = dataset(spec)
-    data = dataclasses.replace(data, metadata=_stable(data.metadata))
-    expert = spec if spec.expert != "random" else data_spec(profile, spec.task, spec.base_size, 1.0)
-    refs = {
-        "min": _reference(
-            profile, dataclasses.replace(expert.base("random"), goal_region=spec.goal_region), cache
-        ),
-        "max": _reference(profile, expert, cache),
-    }
     folder = minari_dir() / ident
-    if _built_key(ident) is None:
-        export_minari(
-            data, ident, reward=RELEASE_REWARD, card=_card(profile, ident, spec, data, refs)
+    if _built_key(ident) is not None:
+        data = import_minari(ident)  # built already: read, not collected or evaluated again
+    else:
+        data = dataset(spec)
+        data = dataclasses.replace(data, metadata=_stable(data.metadata))
+        expert = (
+            spec if spec.expert != "random" else data_spec(profile, spec.task, spec.base_size, 1.0)
         )
+        random = dataclasses.replace(expert.base("random"), goal_region=spec.goal_region)
+        refs = {
+            "min": _reference(profile, random, cache),
+            "max": _reference(profile, expert, cache),
+        }
+        card = _card(profile, spec, data, refs)
+        export_minari(data, ident, reward=RELEASE_REWARD, card=card)
         try:
             hdf5 = file_hashes(folder)[HDF5_FILE]
             # The commit that built these bytes: the published one when they are the same.

@@ -473,6 +473,39 @@ def _dataset_parser(sub: argparse._SubParsersAction) -> None:
     )
     ia.set_defaults(run=_dataset_import_authors)
 
+    ea = dsub.add_parser("export-authors", help="write a dataset in the authors' pickle format")
+    ea.add_argument("source", help="a dataset: PATH.npz or a Minari id")
+    ea.add_argument("--out", required=True, type=Path, metavar="PATH.pkl")
+    ea.add_argument("--reward", choices=list(REWARDS), default="sparse")
+    ea.set_defaults(run=_dataset_export_authors)
+
+    bd = dsub.add_parser(
+        "build",
+        help="build a profile's datasets as Minari datasets (make datasets)",
+        description="Build every expert and random dataset of a profile as Minari datasets in "
+        "$MINARI_DATASETS_PATH (default artifacts/minari), then check them against the "
+        "profile's manifest results/PROFILE/datasets.json, or write it where it has none.",
+    )
+    bd.add_argument("--profile", required=True, choices=list(PROFILES))
+    bd.add_argument(
+        "--write-manifest",
+        action="store_true",
+        help="(maintainers) record these datasets as the manifest, replacing the committed one",
+    )
+    bd.set_defaults(run=_dataset_build)
+
+    vf = dsub.add_parser(
+        "verify",
+        help="check a profile's Minari datasets against its manifest",
+        description="Hash every file of the profile's datasets (building those not built "
+        "yet) and compare with results/PROFILE/datasets.json.",
+    )
+    vf.add_argument("profile", choices=list(PROFILES))
+    vf.set_defaults(run=_dataset_verify)
+
+    cd = dsub.add_parser("card", help="regenerate docs/datasets.md from the manifests")
+    cd.set_defaults(run=_dataset_card)
+
 
 def _dataset_info(args: argparse.Namespace) -> int:
     from gcdt.data import load_dataset
@@ -534,6 +567,49 @@ def _dataset_import_authors(args: argparse.Namespace) -> int:
     return 0
 
 
+def _dataset_export_authors(args: argparse.Namespace) -> int:
+    from gcdt.data import export_authors
+    from gcdt.experiments.release import load_source
+
+    check_writable(args.out)
+    dataset = load_source(args.source)
+    path = export_authors(dataset, args.out, reward=args.reward)
+    print(f"wrote {dataset.n_episodes} episodes ({args.reward} rewards) to {path}")
+    return 0
+
+
+def _dataset_build(args: argparse.Namespace) -> int:
+    from gcdt.experiments import get_profile
+    from gcdt.experiments.release import build, manifest_path
+    from gcdt.paths import minari_dir
+
+    profile = get_profile(args.profile)
+    print(f"MINARI_DATASETS_PATH={minari_dir()}")
+    for entry in build(profile, write_manifest=args.write_manifest):
+        print(
+            f"{entry['id']}: {entry['transitions']:,} transitions, {entry['episodes']:,} episodes"
+        )
+    print(f"manifest: {manifest_path(profile)}")
+    return 0
+
+
+def _dataset_verify(args: argparse.Namespace) -> int:
+    from gcdt.experiments import get_profile
+    from gcdt.experiments.release import verify
+
+    lines = verify(get_profile(args.profile))
+    print("\n".join(lines))
+    print(f"verified {len(lines)} datasets of profile {args.profile}: every file matches")
+    return 0
+
+
+def _dataset_card(args: argparse.Namespace) -> int:
+    from gcdt.experiments.release import CARD, write_card
+
+    print(f"{CARD} {'written' if write_card() else 'unchanged'}")
+    return 0
+
+
 def _train_parser(sub: argparse._SubParsersAction) -> None:
     sub.add_parser(
         "train",
@@ -551,7 +627,9 @@ def _train_arguments(tr: argparse.ArgumentParser) -> None:
         f"Train from an offline dataset with the paper's recipe; writes {CHECKPOINT_NAME} "
         f"(usable as evaluate --policy) and {LOG_NAME} into --out."
     )
-    tr.add_argument("--dataset", required=True, type=Path, metavar="PATH.npz")
+    tr.add_argument(
+        "--dataset", required=True, metavar="PATH.npz|MINARI_ID", help="a .npz file or a Minari id"
+    )
     tr.add_argument("--out", required=True, type=Path, metavar="DIR")
     tr.add_argument("--task", choices=list(TASKS), help="refuse a dataset of another task")
     _add_config_options(
@@ -565,11 +643,11 @@ def _train_arguments(tr: argparse.ArgumentParser) -> None:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from gcdt.data import load_dataset
+    from gcdt.experiments.release import load_source
     from gcdt.training import TrainConfig, train
 
     check_writable(args.out, folder=True)
-    dataset = load_dataset(args.dataset)
+    dataset = load_source(args.dataset)
     if args.task is not None and dataset.task != args.task:
         raise GcdtError(f"{args.dataset} holds {dataset.task!r} data, not {args.task!r}")
     cfg = _config_from(args, TrainConfig)

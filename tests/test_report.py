@@ -14,7 +14,7 @@ from gcdt.cli import main
 from gcdt.errors import GcdtError
 from gcdt.experiments import RunStore, build_grid
 from gcdt.experiments.grid import RUN_SCHEMA
-from gcdt.experiments.profiles import SMOKE, Scope
+from gcdt.experiments.profiles import PROFILES, SMOKE, Scope
 from gcdt.provenance import utc_now
 from gcdt.report import figures, tables
 
@@ -170,7 +170,7 @@ def test_directions_check_the_papers_floor_at_a_quarter_of_expert_data(tmp_path)
 def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path))
     store = _write_runs(tmp_path / "results" / PROFILE.name / "runs")
-    monkeypatch.setitem(report.PROFILES, PROFILE.name, PROFILE)
+    monkeypatch.setitem(PROFILES, PROFILE.name, PROFILE)
     assert "No wall time recorded" in report.readme_block(PROFILE)
     # Two runs made by an earlier, interrupted `make reproduce`; the others by this one.
     grid = build_grid(PROFILE)

@@ -190,7 +190,10 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     report.write_report(PROFILE)
     block = report.readme_block(PROFILE)
     assert "**90 min**" in block and "| GC-DT vs BC, Push sparse |" in block
-    assert "2 runs (2.0 h of their own time) were already done when it started" in block
+    assert (
+        "resumed an interrupted reproduction: 2 runs (2.0 h of their own time) were done" in block
+    )
+    assert "it took **90 min** for the rest" in block  # the invocation's time, named as such
     assert "![Fig. 3: success rate vs dataset size (RQ4)](figures/report-test/" in block
     assert "![Goal generalisation (ours): success inside vs outside" in block
     # Each figure is followed by its numbers: Fig. 3's points, success inside and outside.

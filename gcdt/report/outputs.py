@@ -60,6 +60,7 @@ def write_figures(profile: Profile, runs) -> list[Path]:
         ("fig3_dataset_size", figures.dataset_size_figure),
         ("fig4_expert_ratio", figures.expert_ratio_figure),
         ("tqc_learning_curves", figures.tqc_learning_curves_figure),
+        ("online_offline", figures.online_offline_figure),
         ("training_loss", figures.training_loss_figure),
         ("return_target", targets.target_figure),
         ("goal_generalisation", generalisation.generalisation_figure),

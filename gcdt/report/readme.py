@@ -67,20 +67,26 @@ def _wall_time_text(profile: Profile) -> str:
     record = json.loads(path.read_text())
     minutes = record["wall_seconds"] / 60
     machine = record["machine"]
-    text = (
-        f"Wall time of `{record['command']}` (notebooks, runs and report; environment "
-        f"install excluded): **{minutes:.0f} min** on {machine['cores']} cores "
-        f"({machine['cpu']}), {record['runs']} runs, finished {record['finished']} at "
-        f"commit {str(record['git_commit'])[:12]}."
+    where = (
+        f"on {machine['cores']} cores ({machine['cpu']}), {record['runs']} runs, finished "
+        f"{record['finished']} at commit {str(record['git_commit'])[:12]}."
     )
+    if record.get("earlier_runs"):
+        # A resumed invocation's wall time is not the reproduction's: say which it is.
+        text = (
+            f"The last invocation of `{record['command']}` resumed an interrupted "
+            f"reproduction: {record['earlier_runs']} runs "
+            f"({record['earlier_run_seconds'] / 3600:.1f} h of their own time) were done "
+            f"before it, and it took **{minutes:.0f} min** for the rest (runs, notebooks and "
+            f"report; environment install excluded) {where}"
+        )
+    else:
+        text = (
+            f"Wall time of `{record['command']}` (runs, notebooks and report; environment "
+            f"install excluded): **{minutes:.0f} min** {where}"
+        )
     if "run_seconds" in record:
         text += f" The runs' own times add up to {record['run_seconds'] / 3600:.1f} h of work."
-    if record.get("earlier_runs"):
-        text += (
-            f" {record['earlier_runs']} runs ({record['earlier_run_seconds'] / 3600:.1f} h of "
-            "their own time) were already done when it started (an interrupted reproduction, "
-            "resumed) and are not in its wall time."
-        )
     for other, count in _shared_runs(profile).items():
         text += (
             f" {count} of its run files are the `{other}` profile's, byte for byte: the same "

@@ -12,7 +12,7 @@ BACKEND ?= local
 REPRO_DIR ?= $(or $(GCDT_OUTPUTS),$(or $(GCDT_ARTIFACTS),artifacts)/reproduce)
 NOTEBOOKS := $(sort $(wildcard notebooks/[0-9]*.ipynb))
 
-.PHONY: install test lint bench bench-tqc reproduce publish figures lab clean help
+.PHONY: install test lint bench bench-tqc reproduce publish figures datasets lab clean help
 
 help:
 	@echo "make install    create $(VENV) from environment/ (no-op when up to date)"
@@ -25,6 +25,8 @@ help:
 	@echo "                the results against the published ones (results/PROFILE/)"
 	@echo "make publish    (maintainers) make that reproduction the published results/ and figures/"
 	@echo "make figures    [PROFILE=...] re-render tables and figures from results/PROFILE/runs/"
+	@echo "make datasets   PROFILE=P: its expert and random data as Minari datasets in artifacts/minari,"
+	@echo "                checked against results/PROFILE/datasets.json; docs/datasets.md"
 	@echo "make lab        JupyterLab with the project's kernel"
 	@echo "make clean      remove caches (keeps $(VENV) and artifacts/)"
 
@@ -98,6 +100,14 @@ publish: install
 # Re-render the tables and figures from results/$(PROFILE)/runs/ alone.
 figures: install
 	env -u GCDT_OUTPUTS $(VENV)/bin/gcdt report --profile $(PROFILE)
+
+# The profile's collections as Minari datasets in artifacts/minari (or $MINARI_DATASETS_PATH),
+# checked against the published manifest results/PROFILE/datasets.json (written where there
+# is none; maintainers replace it with `gcdt dataset build --profile P --write-manifest`), and
+# the card docs/datasets.md regenerated from the manifests.
+datasets: install
+	env -u GCDT_OUTPUTS $(VENV)/bin/gcdt dataset build --profile $(PROFILE)
+	$(VENV)/bin/gcdt dataset card
 
 # Containers run as root, which JupyterLab refuses without --allow-root.
 lab: install

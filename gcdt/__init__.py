@@ -1,10 +1,20 @@
 """gcdt: Goal-Conditioned Decision Transformer for multi-goal offline RL on panda-gym.
 
-The library follows one data flow: env -> policy -> collector -> dataset -> trainer ->
-checkpoint -> evaluator -> results -> report. Built so far: the tasks (`gcdt.envs`), the
-policies (`gcdt.policies`), the stepping loop they run in (`gcdt.rollout`), the evaluator
-(`gcdt.evaluation`), the offline datasets (`gcdt.data`), the models (`gcdt.models`),
-their trainer (`gcdt.training`) and its checkpoints (`gcdt.checkpoint`).
+One data flow, env -> policy -> dataset -> trainer -> checkpoint -> evaluator -> results ->
+report, one module or package per step:
+
+- `gcdt.envs` (the tasks), `gcdt.regions` (goal regions), `gcdt.policies`, `gcdt.rollout`
+  (the one stepping loop);
+- `gcdt.data`: offline datasets (collection, subsets and mixtures, Minari, the authors' files);
+- `gcdt.models` (GC-DT and BC; `gcdt.fast_forward`, `gcdt.hf_reference`), `gcdt.methods`
+  (the methods by name), `gcdt.training` and its checkpoints (`gcdt.checkpoint`);
+- `gcdt.evaluation`: the one evaluator; `gcdt.explorer`: a rollout towards a chosen goal;
+- `gcdt.baselines`: TQC+HER, the online baseline and expert;
+- `gcdt.experiments`: the grid of the paper's runs, their store and sweeps;
+- `gcdt.report`: tables, figures, the README's results and the reproduction check;
+- `gcdt.cli`: the `gcdt` command; `gcdt.papermill_engine`: the notebooks' engine;
+- `gcdt.paths`, `gcdt.provenance`, `gcdt.settings`, `gcdt.device`, `gcdt.progress`,
+  `gcdt.errors`: what they all share.
 """
 
 from gcdt.errors import GcdtError

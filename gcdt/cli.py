@@ -435,6 +435,91 @@ class DatasetImportAuthors(_WritesDataset):
 
 
 @dataclass(frozen=True, kw_only=True)
+class DatasetExportAuthors(_Command):
+    """write a dataset in the authors' pickle format"""
+
+    name = "dataset export-authors"
+    source: str = setting(REQUIRED, "a dataset: PATH.npz or a Minari id", positional=True)
+    out: Path = setting(REQUIRED, "the pickle to write", metavar="PATH.pkl")
+    reward: RewardType = setting("sparse", "the rewards stored")
+
+    def run(self, command: str) -> int:
+        from gcdt.data import export_authors
+        from gcdt.experiments.release import load_source
+
+        check_writable(self.out)
+        dataset = load_source(self.source)
+        path = export_authors(dataset, self.out, reward=self.reward)
+        print(f"wrote {dataset.n_episodes} episodes ({self.reward} rewards) to {path}")
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetBuild(_Command):
+    """build a profile's datasets as Minari datasets (make datasets)
+
+    Build every expert and random dataset of a profile as Minari datasets in
+    $MINARI_DATASETS_PATH (default artifacts/minari), then check them against the profile's
+    manifest results/PROFILE/datasets.json, or write it where it has none."""
+
+    name = "dataset build"
+    profile: str = setting(REQUIRED, "the profile whose datasets to build", choices=PROFILES)
+    write_manifest: bool = setting(
+        False, "(maintainers) record these datasets as the manifest, replacing the committed one"
+    )
+
+    def run(self, command: str) -> int:
+        from gcdt.experiments import get_profile
+        from gcdt.experiments.release import build, manifest_path
+        from gcdt.paths import minari_dir
+
+        profile = get_profile(self.profile)
+        print(f"MINARI_DATASETS_PATH={minari_dir()}")
+        for entry in build(profile, write_manifest=self.write_manifest):
+            print(
+                f"{entry['id']}: {entry['transitions']:,} transitions, "
+                f"{entry['episodes']:,} episodes"
+            )
+        print(f"manifest: {manifest_path(profile)}")
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetVerify(_Command):
+    """check a profile's Minari datasets against its manifest
+
+    Hash every file of the profile's datasets (building those not built yet) and compare with
+    results/PROFILE/datasets.json."""
+
+    name = "dataset verify"
+    profile: str = setting(
+        REQUIRED, "the profile whose datasets to check", choices=PROFILES, positional=True
+    )
+
+    def run(self, command: str) -> int:
+        from gcdt.experiments import get_profile
+        from gcdt.experiments.release import verify
+
+        lines = verify(get_profile(self.profile))
+        print("\n".join(lines))
+        print(f"verified {len(lines)} datasets of profile {self.profile}: every file matches")
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetCard(_Command):
+    """regenerate docs/datasets.md from the manifests"""
+
+    name = "dataset card"
+
+    def run(self, command: str) -> int:
+        from gcdt.experiments.release import CARD, write_card
+
+        print(f"{CARD} {'written' if write_card() else 'unchanged'}")
+        return 0
+
+
+@dataclass(frozen=True, kw_only=True)
 class Train(_Command, _Progress):
     """train GC-DT, a DT ablation or BC on a dataset
 
@@ -442,7 +527,7 @@ class Train(_Command, _Progress):
     evaluate --policy) and the training log into --out."""
 
     name = "train"
-    dataset: Path = setting(REQUIRED, "the offline dataset", metavar="PATH.npz")
+    dataset: str = setting(REQUIRED, "a .npz file or a Minari id", metavar="PATH.npz|MINARI_ID")
     out: Path = setting(REQUIRED, "the folder to write into", metavar="DIR")
     task: str | None = setting(None, "refuse a dataset of another task", choices=TASKS)
     config: TrainConfig
@@ -455,11 +540,11 @@ class Train(_Command, _Progress):
         return {"TrainConfig": TrainConfig}
 
     def run(self, command: str) -> int:
-        from gcdt.data import load_dataset
+        from gcdt.experiments.release import load_source
         from gcdt.training import train
 
         check_writable(self.out, folder=True)
-        dataset = load_dataset(self.dataset)
+        dataset = load_source(self.dataset)
         if self.task is not None and dataset.task != self.task:
             raise GcdtError(f"{self.dataset} holds {dataset.task!r} data, not {self.task!r}")
         result = train(
@@ -715,6 +800,10 @@ COMMANDS: tuple[type[_Command], ...] = (
     DatasetExportMinari,
     DatasetImportMinari,
     DatasetImportAuthors,
+    DatasetExportAuthors,
+    DatasetBuild,
+    DatasetVerify,
+    DatasetCard,
     Train,
     TQCTrain,
     Sweep,

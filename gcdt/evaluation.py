@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import io
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -146,8 +147,9 @@ def evaluate(
 ) -> EvaluationResult:
     """Run `policy` on `task` with `reward` and measure it.
 
-    Give either `timesteps` (the paper's protocol; the default, 10,000) or `episodes` (that
-    many whole episodes, independent of their lengths); `EvaluationConfig` checks them.
+    Give either `timesteps` (the paper's protocol; the default, `paper.EVAL_TIMESTEPS`) or
+    `episodes` (that many whole episodes, independent of their lengths); `EvaluationConfig`
+    checks them.
     `n_envs > 1` steps envs side by side, in processes of their own unless `in_process` (the
     episodes are the same either way), and the policy sees the whole batch each step. With
     `goal_region`, the envs draw their desired goals from that region only.
@@ -155,67 +157,18 @@ def evaluate(
     config = EvaluationConfig(
         timesteps=timesteps, episodes=episodes, n_envs=n_envs, seed=seed, in_process=in_process
     )
-    timesteps = config.total_timesteps()
     env_kwargs = None if goal_region is None else {"goal_region": goal_region}
     rollout = VectorRollout(
         policy, task, reward, n_envs, seed, env_kwargs=env_kwargs, in_process=in_process
     )
-
-    records: list[EpisodeRecord] = []
+    desc = f"evaluate {policy.name} on {task}/{reward}"
     started = time.perf_counter()
-    counted = 0
-    bar = progress_bar(
-        total=timesteps if episodes is None else episodes,
-        unit="step" if episodes is None else "episode",
-        desc=f"evaluate {policy.name} on {task}/{reward}",
-        progress=progress,
-        leave=False,
-    )
-    ep_return = np.zeros(n_envs)
-    ep_length = np.zeros(n_envs, dtype=np.int64)
-    ep_success = np.zeros(n_envs, dtype=bool)
     with rollout:
-        while True:
-            step = rollout.step()
-            # In timesteps mode the last vector step may count only some envs' steps.
-            live = n_envs if episodes is not None else min(n_envs, timesteps - counted)
-            counted += live
-            ep_return += step.reward
-            ep_length += 1
-            ep_success |= step.success
-            done = step.done
-            done[live:] = False  # uncounted steps never finish a counted episode
-
-            final_distance = goal_distance(
-                step.next_obs["achieved_goal"], step.next_obs["desired_goal"]
-            )
-            for i in np.flatnonzero(done):
-                j = int(step.episode[i])
-                if episodes is None or j < episodes:
-                    records.append(
-                        EpisodeRecord(
-                            index=j,
-                            seed=rollout.seed_of(j),
-                            length=int(ep_length[i]),
-                            ret=float(ep_return[i]),
-                            success=bool(ep_success[i]),
-                            final_distance=float(final_distance[i]),
-                        )
-                    )
-                    if episodes is not None:
-                        bar.update(1)
-            if episodes is None:
-                bar.update(live)
-            ep_return[done], ep_length[done], ep_success[done] = 0.0, 0, False
-
-            if episodes is None and counted >= timesteps:
-                break
-            if episodes is not None and len(records) >= episodes:
-                break
+        if episodes is None:
+            records, counted = _fixed_steps(rollout, config.total_timesteps(), desc, progress)
+        else:
+            records, counted = _fixed_episodes(rollout, episodes, desc, progress)
         stepping_seconds = time.perf_counter() - rollout.stepping_started
-    bar.close()
-
-    records.sort(key=lambda e: e.index)
     return EvaluationResult(
         task=rollout.task,
         reward=reward,
@@ -225,9 +178,79 @@ def evaluate(
         timesteps=int(counted),
         wall_seconds=time.perf_counter() - started,
         stepping_seconds=stepping_seconds,
-        episodes=records,
+        episodes=sorted(records, key=lambda e: e.index),
         goal_region=None if goal_region is None else str(goal_region),
     )
+
+
+def _fixed_steps(
+    rollout: VectorRollout, timesteps: int, desc: str, progress: bool
+) -> tuple[list[EpisodeRecord], int]:
+    """The paper's protocol: exactly `timesteps` env steps, the episodes finished within them
+    (unfinished tails dropped); the records and the steps counted."""
+    records: list[EpisodeRecord] = []
+    bar = progress_bar(total=timesteps, unit="step", desc=desc, progress=progress, leave=False)
+    with bar:
+        for live, finished in _episodes(rollout, timesteps):
+            records += finished
+            bar.update(live)
+    return records, timesteps
+
+
+def _fixed_episodes(
+    rollout: VectorRollout, episodes: int, desc: str, progress: bool
+) -> tuple[list[EpisodeRecord], int]:
+    """The run's first `episodes` episodes, however many steps they take; the records and
+    the steps counted."""
+    records: list[EpisodeRecord] = []
+    counted, stream = 0, _episodes(rollout, None)
+    bar = progress_bar(total=episodes, unit="episode", desc=desc, progress=progress, leave=False)
+    with bar:
+        while len(records) < episodes:
+            live, finished = next(stream)
+            counted += live
+            kept = [e for e in finished if e.index < episodes]  # not those begun meanwhile
+            records += kept
+            bar.update(len(kept))
+    return records, counted
+
+
+def _episodes(
+    rollout: VectorRollout, timesteps: int | None
+) -> Iterator[tuple[int, list[EpisodeRecord]]]:
+    """Step `rollout` (entered) and yield, per vector step, the env steps it counts and the
+    episodes that ended in it. With `timesteps`, the stream ends after that many env steps:
+    its last vector step may count only some envs' steps, and an uncounted step never
+    finishes a counted episode."""
+    n_envs, counted = rollout.n_envs, 0
+    ep_return = np.zeros(n_envs)
+    ep_length = np.zeros(n_envs, dtype=np.int64)
+    ep_success = np.zeros(n_envs, dtype=bool)
+    while timesteps is None or counted < timesteps:
+        step = rollout.step()
+        live = n_envs if timesteps is None else min(n_envs, timesteps - counted)
+        counted += live
+        ep_return += step.reward
+        ep_length += 1
+        ep_success |= step.success
+        done = step.done
+        done[live:] = False
+        final_distance = goal_distance(
+            step.next_obs["achieved_goal"], step.next_obs["desired_goal"]
+        )
+        finished = [
+            EpisodeRecord(
+                index=int(step.episode[i]),
+                seed=rollout.seed_of(int(step.episode[i])),
+                length=int(ep_length[i]),
+                ret=float(ep_return[i]),
+                success=bool(ep_success[i]),
+                final_distance=float(final_distance[i]),
+            )
+            for i in np.flatnonzero(done)
+        ]
+        ep_return[done], ep_length[done], ep_success[done] = 0.0, 0, False
+        yield live, finished
 
 
 @dataclass(frozen=True)

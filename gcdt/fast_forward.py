@@ -30,10 +30,10 @@ if TYPE_CHECKING:
 def _cpu_keep_scale(x: torch.Tensor, p: float) -> torch.Tensor:
     """Dropout's mask for `x` on CPU, already scaled: 0 where dropped, 1 / (1 - p) elsewhere.
 
-    PyTorch's CPU Bernoulli draws one Mersenne-Twister number per element (~14 ns); in
-    training the paper's DT spent a quarter of each step there. Here the mask comes from
-    16 random bits per element drawn by NumPy's SFC64, seeded from torch's generator, so
-    `torch.manual_seed` and saved RNG states still make runs reproducible. The drop
+    PyTorch's CPU Bernoulli draws one Mersenne-Twister number per element, a large share of
+    a training step of the paper's DT. Here the mask comes from 16 random bits per element
+    drawn by NumPy's SFC64, seeded from torch's generator, so `torch.manual_seed` and saved
+    RNG states still make runs reproducible. The drop
     probability is `p` rounded to a multiple of 2^-16 (0.1 -> 0.100006).
     """
     threshold = round(p * 65536)
@@ -85,14 +85,13 @@ class _Rows:
     """Where a block's rows of tokens `[n, width]` sit in the grid `[batch, tokens]`.
 
     On CPU only real tokens are rows: a training window of a short episode is mostly left
-    padding (PickAndPlace's scripted episodes average 12.6 steps against K = 20), and
-    everything but attention works token by token, so padding costs nothing but its
-    attention columns. On a GPU every token is a row: finding the real ones (`nonzero`)
-    would stall the host until the GPU's queue drains, while kernels of this size cost their
-    launch, not their rows (measured on an H100, 50-step windows: a training step 7.1 ms
-    with the padding's rows against 7.7-8.5 ms without; mixed on 13-step ones), and without
-    host synchronisation the forward pass can be captured in a CUDA graph. `real` is the
-    bool grid; without packing, rows and grid are views of each other.
+    padding (PickAndPlace's scripted episodes are shorter than K = 20), and everything but
+    attention works token by token, so padding costs nothing but its attention columns. On a
+    GPU every token is a row: finding the real ones (`nonzero`) would stall the host until
+    the GPU's queue drains, while kernels of this size cost their launch, not their rows (on
+    an H100, keeping the padding's rows was faster on long windows, about even on short
+    ones), and without host synchronisation the forward pass can be captured in a CUDA
+    graph. `real` is the bool grid; without packing, rows and grid are views of each other.
     """
 
     def __init__(self, real: torch.Tensor) -> None:

@@ -24,6 +24,16 @@ def artifacts_dir() -> Path:
     return Path(os.environ.get(ARTIFACTS_ENV) or REPO_ROOT / "artifacts")
 
 
+#: Minari's own variable for its datasets folder; gcdt's default is `<artifacts>/minari`.
+MINARI_ENV = "MINARI_DATASETS_PATH"
+
+
+def minari_dir() -> Path:
+    """Where gcdt reads and writes Minari datasets: `$MINARI_DATASETS_PATH`, else
+    `<artifacts>/minari` (not Minari's `~/.minari/datasets`: bulk stays in the artifacts)."""
+    return Path(os.environ.get(MINARI_ENV) or artifacts_dir() / "minari").resolve()
+
+
 #: Environment variable that points results/ and figures/ at a working reproduction's own
 #: folder (`make reproduce` sets it), so a user's runs never mix with the published ones.
 OUTPUTS_ENV = "GCDT_OUTPUTS"

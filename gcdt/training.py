@@ -7,8 +7,9 @@ Windows start at a transition drawn uniformly from the whole dataset, which is e
 authors' "episode in proportion to its length, then a uniform start within it".
 
 A budget is gradient steps, or the authors' epochs of ceil(#episodes / batch) steps each.
-Checkpoints (`gcdt.checkpoint`) hold everything needed to resume (weights, optimiser,
-schedule, RNG states), and on CPU a resumed run ends with the same weights as an
+`train` is the loop; after each step two hooks log the loss and write checkpoints.
+Checkpoints (`gcdt.checkpoint.TrainingState`) hold everything needed to resume (weights,
+optimiser, schedule, RNG states), and on CPU a resumed run ends with the same weights as an
 uninterrupted one. `TrainConfig` declares every setting once, with its help text, and
 `gcdt train` takes each as an option.
 """
@@ -30,13 +31,11 @@ import torch
 
 from gcdt import paper
 from gcdt.checkpoint import (
-    CHECKPOINT_FORMAT,
     CHECKPOINT_NAME,
-    CHECKPOINT_VERSION,
     MODELS,
+    TrainingState,
     build_model,
     load_checkpoint,
-    save_checkpoint,
 )
 from gcdt.data.dataset import Dataset
 from gcdt.device import resolve_device
@@ -45,7 +44,6 @@ from gcdt.errors import GcdtError
 from gcdt.models import DTConfig, GoalConditioning, state_columns
 from gcdt.paths import atomic_write
 from gcdt.progress import progress_bar
-from gcdt.provenance import package_versions, utc_now
 from gcdt.settings import check_minimums, setting
 
 Method = Literal["dt", "bc"]
@@ -206,10 +204,10 @@ def keep_freed_memory() -> bool:
     """Let glibc's malloc keep freed memory for reuse instead of handing it back to the OS.
 
     A CPU training step allocates and frees tensors of several MB. By default glibc maps each
-    one afresh and unmaps it when freed, so every step pays page faults on first touch: on a
-    2-core EPYC a quarter of the DT step (torch profiler, ReLU forward and backward on
-    [64, 60, 512] took 3x longer). Raising the mmap and trim thresholds keeps those blocks
-    in the heap. Process-wide and idempotent; returns False where libc is not glibc.
+    one afresh and unmaps it when freed, so every step pays page faults on first touch (the
+    torch profiler shows them in the DT step's ReLU forward and backward on [64, 60, 512]).
+    Raising the mmap and trim thresholds keeps those blocks in the heap. Process-wide and
+    idempotent; returns False where libc is not glibc.
     """
     if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
         return False
@@ -279,7 +277,40 @@ def train(
     long run into sessions; a later `resume=True` call finishes it.
     """
     out_dir = Path(out_dir)
-    ckpt_path, log_path = out_dir / CHECKPOINT_NAME, out_dir / LOG_NAME
+    identity, state = _start(dataset, cfg, out_dir, resume)
+    sampler = WindowSampler(dataset, cfg, state.state_mean, state.state_std, state.device)
+    total = identity["total_steps"]
+    end = total if stop_after is None else min(total, state.step + stop_after)
+    checkpoints = _Checkpoints(out_dir, identity, cfg, end)
+    log = _LossLog(cfg, total, out_dir, state.step, f"{cfg.method} on {dataset.task}", progress)
+    state.model.train()
+    with log:
+        while state.step < end:
+            batch = sampler.sample(state.rng)
+            loss = train_step(state.model, state.optimizer, batch, cfg, state.device)
+            if not torch.isfinite(loss):
+                raise GcdtError(
+                    f"training loss became {loss.item()} at step {state.step}: stopped; "
+                    f"the last good checkpoint is {checkpoints.last_good()}"
+                )
+            state.schedule.step()
+            state.step += 1
+            log.after_step(state, loss.item())
+            checkpoints.after_step(state)
+    checkpoints.save(state, complete=state.step >= total)
+    final_loss = state.history[-1]["loss"] if state.history else float("nan")
+    seconds = time.perf_counter() - log.started
+    return TrainResult(
+        checkpoints.path, checkpoints.log, state.step, seconds, final_loss, state.history
+    )
+
+
+def _start(
+    dataset: Dataset, cfg: TrainConfig, out_dir: Path, resume: bool
+) -> tuple[dict[str, Any], TrainingState]:
+    """The run's identity (what its checkpoint names it by) and its state at the first step
+    of this call: fresh, or with `resume` restored from the checkpoint in `out_dir`."""
+    ckpt_path = out_dir / CHECKPOINT_NAME
     if ckpt_path.exists() and not resume:
         raise GcdtError(
             f"{out_dir} already holds a checkpoint: resume it (--resume) or choose another --out"
@@ -289,134 +320,110 @@ def train(
         keep_freed_memory()
     cols = state_columns(dataset.task, cfg.goal_conditioning)
     total = cfg.total_steps(dataset.n_episodes)
-    model_config = cfg.model_config(cols.stop, dataset.spec.action_dim)
-
+    identity = {
+        "method": cfg.method,
+        "task": dataset.task,
+        "train_config": asdict(cfg),
+        "model_config": cfg.model_config(cols.stop, dataset.spec.action_dim),
+        "total_steps": total,
+        "dataset": dataset.summary(),
+    }
     torch.manual_seed(cfg.seed)
-    model = build_model(cfg.method, model_config).to(device)
+    model = build_model(cfg.method, identity["model_config"]).to(device)
     optimizer = make_optimizer(model, cfg)
+    state = TrainingState(
+        model, optimizer, _schedule(optimizer, cfg, total), np.random.default_rng(cfg.seed), device
+    )
+    if not resume:
+        states = dataset.states[:, cols].astype(np.float64)
+        state.state_mean = states.mean(axis=0).astype(np.float32)
+        state.state_std = (states.std(axis=0) + 1e-6).astype(np.float32)  # as the authors' code
+        return identity, state
+    ckpt = load_checkpoint(ckpt_path)
+    if _learning_config(ckpt["train_config"]) != _learning_config(identity["train_config"]) or (
+        ckpt["task"] != dataset.task
+    ):
+        raise GcdtError(f"{ckpt_path} was trained with another config or task: cannot resume")
+    state.restore(ckpt)
+    return identity, state
+
+
+def _schedule(
+    optimizer: torch.optim.Optimizer, cfg: TrainConfig, total: int
+) -> torch.optim.lr_scheduler.LambdaLR:
+    """Linear warm-up over `warmup_fraction` of the steps, then linear decay to 0."""
     warmup = max(1, int(cfg.warmup_fraction * total))
-    schedule = torch.optim.lr_scheduler.LambdaLR(
+    return torch.optim.lr_scheduler.LambdaLR(
         optimizer, lambda s: min((s + 1) / warmup, max(0.0, (total - s) / max(1, total - warmup)))
     )
-    rng = np.random.default_rng(cfg.seed)
-    step, history = 0, []
-    window_loss, window_steps = 0.0, 0  # losses since the last log row
-    if resume:
-        ckpt = load_checkpoint(ckpt_path)
-        if _learning_config(ckpt["train_config"]) != _learning_config(asdict(cfg)) or (
-            ckpt["task"] != dataset.task
-        ):
-            raise GcdtError(f"{ckpt_path} was trained with another config or task: cannot resume")
-        model.load_state_dict(ckpt["model"])
-        optimizer.load_state_dict(ckpt["optimizer"])
-        schedule.load_state_dict(ckpt["schedule"])
-        rng.bit_generator.state = ckpt["rng"]["numpy"]
-        torch.set_rng_state(ckpt["rng"]["torch"])
-        if device.type == "cuda" and ckpt["rng"].get("cuda") is not None:
-            # Dropout on a GPU draws from the device's generator, not the CPU one.
-            torch.cuda.set_rng_state(ckpt["rng"]["cuda"], device)
-        mean, std = ckpt["state_mean"].numpy(), ckpt["state_std"].numpy()
-        step, history = ckpt["step"], ckpt["history"]
-        window_loss, window_steps = ckpt["log_window"]
-    else:
-        states = dataset.states[:, cols].astype(np.float64)
-        mean = states.mean(axis=0).astype(np.float32)
-        std = (states.std(axis=0) + 1e-6).astype(np.float32)  # as the authors' code
-    sampler = WindowSampler(dataset, cfg, mean, std, device)
 
-    def save(complete: bool) -> None:
-        nonlocal last_save
-        # The log first: wherever a checkpoint exists, a log at least as recent does too.
-        _write_log(log_path, history)
-        save_checkpoint(
-            ckpt_path,
-            {
-                "format": CHECKPOINT_FORMAT,
-                "version": CHECKPOINT_VERSION,
-                "method": cfg.method,
-                "task": dataset.task,
-                "train_config": asdict(cfg),
-                "model_config": model_config,
-                "model": model.state_dict(),
-                "optimizer": optimizer.state_dict(),
-                "schedule": schedule.state_dict(),
-                "state_mean": torch.as_tensor(mean),
-                "state_std": torch.as_tensor(std),
-                "rng": {
-                    "numpy": rng.bit_generator.state,
-                    "torch": torch.get_rng_state(),
-                    "cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None,
-                },
-                "step": step,
-                "total_steps": total,
-                "complete": complete,
-                "history": history,
-                "log_window": [window_loss, window_steps],
-                "dataset": dataset.summary(),
-                "created": utc_now(),
-                "versions": package_versions(),
-            },
+
+class _LossLog:
+    """The logging hook: a history row (mean loss since the last row, learning rate, seconds)
+    every `log_every` steps and at the last, on the progress bar and in TensorBoard too."""
+
+    def __init__(
+        self, cfg: TrainConfig, total: int, out_dir: Path, step: int, run: str, progress: bool
+    ) -> None:
+        self.every, self.total = cfg.log_every, total
+        self.board = _tensorboard(out_dir)
+        self.bar = progress_bar(
+            total=total, initial=step, desc=f"train {run}", progress=progress, leave=False
         )
-        last_save = time.perf_counter()
+        self.started = time.perf_counter()
 
-    end = total if stop_after is None else min(total, step + stop_after)
-    board = _tensorboard(out_dir)
-    bar = progress_bar(
-        total=total,
-        initial=step,
-        desc=f"train {cfg.method} on {dataset.task}",
-        progress=progress,
-        leave=False,
-    )
-    model.train()
-    started = last_save = time.perf_counter()
-    try:
-        while step < end:
-            loss = train_step(model, optimizer, sampler.sample(rng), cfg, device)
-            if not torch.isfinite(loss):
-                last = ckpt_path if ckpt_path.exists() else "none (none written yet)"
-                raise GcdtError(
-                    f"training loss became {loss.item()} at step {step}: stopped; "
-                    f"the last good checkpoint is {last}"
-                )
-            schedule.step()
-            step += 1
-            window_loss += loss.item()
-            window_steps += 1
-            bar.update(1)
-            if step % cfg.log_every == 0 or step == total:
-                history.append(
-                    {
-                        "step": step,
-                        "loss": window_loss / window_steps,
-                        "lr": schedule.get_last_lr()[0],
-                        "seconds": time.perf_counter() - started,
-                    }
-                )
-                bar.set_postfix(loss=f"{history[-1]['loss']:.4f}")
-                if board is not None:
-                    board.add_scalar("train/loss", history[-1]["loss"], step)
-                    board.add_scalar("train/lr", history[-1]["lr"], step)
-                window_loss, window_steps = 0.0, 0
-            # By steps and by the clock: a killed run loses at most checkpoint_seconds of work.
-            if step < end and (
-                step % cfg.checkpoint_every == 0
-                or time.perf_counter() - last_save >= cfg.checkpoint_seconds
-            ):
-                save(complete=False)
-    finally:
-        bar.close()
-        if board is not None:
-            board.close()
-    save(complete=step >= total)
-    return TrainResult(
-        ckpt_path,
-        log_path,
-        step,
-        time.perf_counter() - started,
-        history[-1]["loss"] if history else float("nan"),
-        history,
-    )
+    def after_step(self, state: TrainingState, loss: float) -> None:
+        state.window_loss += loss
+        state.window_steps += 1
+        self.bar.update(1)
+        if state.step % self.every and state.step != self.total:
+            return
+        row = {
+            "step": state.step,
+            "loss": state.window_loss / state.window_steps,
+            "lr": state.schedule.get_last_lr()[0],
+            "seconds": time.perf_counter() - self.started,
+        }
+        state.history.append(row)
+        state.window_loss, state.window_steps = 0.0, 0
+        self.bar.set_postfix(loss=f"{row['loss']:.4f}")
+        if self.board is not None:
+            self.board.add_scalar("train/loss", row["loss"], state.step)
+            self.board.add_scalar("train/lr", row["lr"], state.step)
+
+    def __enter__(self) -> _LossLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.bar.close()
+        if self.board is not None:
+            self.board.close()
+
+
+class _Checkpoints:
+    """The checkpoint hook: the log and a checkpoint every `checkpoint_every` steps and at most
+    `checkpoint_seconds` apart, so that a killed run loses at most that much work."""
+
+    def __init__(self, out_dir: Path, identity: dict[str, Any], cfg: TrainConfig, end: int):
+        self.path, self.log = out_dir / CHECKPOINT_NAME, out_dir / LOG_NAME
+        self.identity, self.end = identity, end
+        self.every, self.seconds = cfg.checkpoint_every, cfg.checkpoint_seconds
+        self.last_save = time.perf_counter()
+
+    def after_step(self, state: TrainingState) -> None:
+        if state.step < self.end and (
+            state.step % self.every == 0 or time.perf_counter() - self.last_save >= self.seconds
+        ):
+            self.save(state, complete=False)
+
+    def save(self, state: TrainingState, *, complete: bool) -> None:
+        # The log first: wherever a checkpoint exists, a log at least as recent does too.
+        _write_log(self.log, state.history)
+        state.save(self.path, self.identity, complete=complete)
+        self.last_save = time.perf_counter()
+
+    def last_good(self) -> str:
+        return str(self.path) if self.path.exists() else "none (none written yet)"
 
 
 def _tensorboard(out_dir: Path):

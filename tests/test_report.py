@@ -14,7 +14,7 @@ from gcdt.cli import main
 from gcdt.errors import GcdtError
 from gcdt.experiments import RunStore, build_grid
 from gcdt.experiments.grid import RUN_SCHEMA
-from gcdt.experiments.profiles import SMOKE, Scope
+from gcdt.experiments.profiles import PROFILES, SMOKE, Scope
 from gcdt.provenance import utc_now
 from gcdt.report import figures, tables
 
@@ -170,7 +170,7 @@ def test_directions_check_the_papers_floor_at_a_quarter_of_expert_data(tmp_path)
 def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path))
     store = _write_runs(tmp_path / "results" / PROFILE.name / "runs")
-    monkeypatch.setitem(report.PROFILES, PROFILE.name, PROFILE)
+    monkeypatch.setitem(PROFILES, PROFILE.name, PROFILE)
     assert "No wall time recorded" in report.readme_block(PROFILE)
     # Two runs made by an earlier, interrupted `make reproduce`; the others by this one.
     grid = build_grid(PROFILE)
@@ -190,7 +190,10 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     report.write_report(PROFILE)
     block = report.readme_block(PROFILE)
     assert "**90 min**" in block and "| GC-DT vs BC, Push sparse |" in block
-    assert "2 runs (2.0 h of their own time) were already done when it started" in block
+    assert (
+        "resumed an interrupted reproduction: 2 runs (2.0 h of their own time) were done" in block
+    )
+    assert "it took **90 min** for the rest" in block  # the invocation's time, named as such
     assert "![Fig. 3: success rate vs dataset size (RQ4)](figures/report-test/" in block
     assert "![Goal generalisation (ours): success inside vs outside" in block
     # Each figure is followed by its numbers: Fig. 3's points, success inside and outside.
@@ -263,3 +266,28 @@ def test_return_target_study_picks_on_validation_and_scores_on_test(tmp_path):
     assert len(fig.axes[0].get_lines()) >= 1
     with pytest.raises(GcdtError, match="unknown split 'train': expected one of validation"):
         targets.study_runs(runs, "train")
+
+
+def test_online_offline_figure_sets_agents_curves_beside_offline_runs(runs, tmp_path):
+    agent = tmp_path / "tqc_push_sparse"
+    agent.mkdir()
+    (agent / "run.json").write_text(json.dumps({"task": "push", "reward": "sparse", "seed": 0}))
+    (agent / "eval.csv").write_text(
+        "env_steps,train_seconds,wall_seconds,success_rate,mean_return,episodes\n"
+        "25000,1.0,1.0,0.2,-40.0,100\n50000,2.0,2.0,0.9,-9.5,100\n"
+    )
+    agents = tables.load_agent_curves(tmp_path)
+    assert list(agents["env_steps"]) == [25000, 50000] and set(agents["agent"]) == {agent.name}
+    fig = figures.online_offline_figure(runs, agents)
+    reach, push = fig.axes
+    assert push.get_title() == "Push, sparse reward" and push.get_xscale() == "log"
+    (online,) = [line for line in push.lines if "published agent" in line.get_label()]
+    np.testing.assert_allclose(online.get_ydata(), [20.0, 90.0])
+    # GC-DT's points: the Table 1 and RQ4 runs on expert data, the mean over seeds per size.
+    gcdt = push.containers[0].lines[0]
+    sizes = sorted({*PROFILE.rq4_sizes, PROFILE.dataset_size})
+    np.testing.assert_array_equal(gcdt.get_xdata(), sizes)
+    expected = [100 * (0.5 * s / PROFILE.dataset_size + 0.2 + 0.1) for s in sizes]
+    np.testing.assert_allclose(np.asarray(gcdt.get_ydata(), dtype=float), expected)
+    assert not [line for line in reach.lines if "published agent" in line.get_label()]
+    assert tables.load_agent_curves(tmp_path / "none").empty

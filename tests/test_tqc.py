@@ -519,3 +519,37 @@ def test_an_env_restored_by_replay_starts_its_episode_exactly():
     b.restore_replay_state(a.replay_state())
     assert b.episodes == a.episodes
     assert all(np.array_equal(a.last_obs[k], b.last_obs[k]) for k in a.last_obs)
+
+
+def test_publish_picks_on_validation_and_measures_held_out_episodes(push_run, tmp_path):
+    from gcdt.baselines.publish import (
+        HELD_OUT_SEED,
+        VALIDATION_SEED,
+        PublishConfig,
+        publish_agent,
+    )
+
+    out = publish_agent(push_run.out_dir, tmp_path / "agent", PublishConfig(3, 4))
+    assert sorted(p.name for p in out.iterdir()) == ["eval.csv", "model.zip", "run.json"]
+    record = json.loads((out / "run.json").read_text())
+    published = record["published"]
+    assert published["model"] in ("final", "best")
+    assert {v["seed"] for v in published["validation"].values()} == {VALIDATION_SEED}
+    assert [v["episodes"] for v in published["validation"].values()] == [3, 3]
+    assert published["held_out"]["seed"] == HELD_OUT_SEED
+    assert published["held_out"]["episodes"] == 4
+    assert [p["env_steps"] for p in record["curve"]] == [160, 320]
+    chosen = push_run.out_dir / ("model.zip" if published["model"] == "final" else "best_model.zip")
+    assert (out / "model.zip").read_bytes() == chosen.read_bytes()
+    # The agent loads as a policy, and a second publication into the same folder is refused.
+    assert make_policy(f"tqc:{out / 'model.zip'}", "push").name == "tqc"
+    with pytest.raises(GcdtError, match="already holds a published agent"):
+        publish_agent(push_run.out_dir, out, PublishConfig(3, 4))
+
+
+def test_publish_refuses_an_unfinished_run(checkpointed, tmp_path):
+    from gcdt.baselines.publish import publish_agent
+
+    with pytest.raises(GcdtError, match="unfinished TQC\\+HER run: finish it with --resume"):
+        publish_agent(checkpointed, tmp_path / "agent")
+    assert not (tmp_path / "agent").exists()

@@ -16,6 +16,7 @@ from gcdt.checkpoint import load_checkpoint
 from gcdt.cli import main
 from gcdt.errors import GcdtError
 from gcdt.evaluation import evaluate
+from gcdt.methods import OFFLINE_METHODS, method_label
 from gcdt.policies import make_policy
 from gcdt.policies.trained import TrainedPolicy
 from gcdt.training import TrainConfig, WindowSampler, train
@@ -261,6 +262,14 @@ def test_checkpoint_policy_matches_model_and_cli(reach_expert_data, tmp_path, ca
     first = policy.predict(obs, np.array([True, True]), np.zeros(2))
     np.testing.assert_allclose(first[0], first[1], rtol=0, atol=1e-6)
     assert one.summary["episodes"] == 4
+
+
+def test_a_trained_policy_is_named_as_the_grid_names_its_method():
+    """One mapping, read both ways: each offline method's trainer method and goal conditioning
+    give a policy of that name; BC is `bc` whatever its states hold."""
+    for name, (method, conditioning) in OFFLINE_METHODS.items():
+        assert method_label(method, conditioning) == name
+    assert method_label("bc", "none") == method_label("bc", "desired") == "bc"
 
 
 def test_policy_predicts_what_the_full_model_predicts(make_dataset, tmp_path):

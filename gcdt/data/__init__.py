@@ -4,10 +4,10 @@ collect(policy, task, transitions, seed=, n_envs=, labels=) -> Dataset   # gcdt.
 Dataset.save(path) / load_dataset(path)                        # one .npz, atomic
 subset(dataset, size, seed) / mix(expert, random, ratio, size, seed)   # RQ4 / RQ5
 export_minari(dataset, id) / import_minari(id)                 # gcdt.data.minari_io
-import_authors(pickle_path, trust_pickle=True)                 # gcdt.data.authors
+import_authors(pickle_path, trust_pickle=True) / export_authors(dataset, path)  # authors.py
 """
 
-from gcdt.data.authors import import_authors
+from gcdt.data.authors import export_authors, import_authors
 from gcdt.data.collect import LABELS, collect, from_episodes
 from gcdt.data.dataset import SCHEMA_VERSION, Dataset, load_dataset
 from gcdt.data.minari_io import export_minari, import_minari
@@ -19,6 +19,7 @@ __all__ = [
     "Dataset",
     "collect",
     "concatenate",
+    "export_authors",
     "export_minari",
     "from_episodes",
     "import_authors",

@@ -1,4 +1,4 @@
-"""Import the authors' released format: a pickled list of episode dicts.
+"""The authors' released format, a pickled list of episode dicts: import and export.
 
 Each episode: `observations` and `next_observations` (dicts of `observation`,
 `desired_goal`, `achieved_goal` arrays `[T, dim]`), `actions` `[T, action_dim]`, `rewards`
@@ -9,6 +9,10 @@ out) otherwise, whatever the file's terminal flags say; the number of episodes w
 disagreed is recorded in the metadata (`terminal_flags_disagreeing`). Everything else is
 checked, not repaired: next observations must continue the observations, and the rewards
 must be panda-gym's sparse or dense reward of the goals.
+
+`export_authors` writes a `Dataset` in that format, so that the authors' code reads gcdt's
+data; each episode also carries its reset seed as `episode_seed`, a key their code does not
+read and the import does, which makes the round trip exact.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from gcdt.data.collect import from_episodes
 from gcdt.data.dataset import Dataset, check_rewards, rewards_match
 from gcdt.envs import OBS_KEYS, REWARDS, TASKS, compute_rewards, get_task, is_success
 from gcdt.errors import GcdtError
+from gcdt.paths import atomic_write
 from gcdt.provenance import utc_now
 
 _EPISODE_KEYS = ("observations", "next_observations", "actions", "rewards", "terminals")
@@ -86,6 +91,29 @@ def import_authors(
         raise GcdtError(f"{path}: {err}") from None
 
 
+def export_authors(dataset: Dataset, path: str | Path, *, reward: str = "sparse") -> Path:
+    """Write `dataset` to `path` in the authors' format, with its `reward` ("sparse" or
+    "dense") as `rewards` and its terminated flags as `terminals`; atomic."""
+    path = Path(path)
+    rewards, nxt = dataset.rewards(reward), dataset.next_observations()
+    a, episodes = dataset.arrays, []
+    for e in range(dataset.n_episodes):
+        lo, hi = int(dataset.offsets[e]), int(dataset.offsets[e + 1])
+        episodes.append(
+            {
+                "observations": {k: a[k][lo:hi] for k in OBS_KEYS},
+                "next_observations": {k: nxt[k][lo:hi] for k in OBS_KEYS},
+                "actions": a["action"][lo:hi],
+                "rewards": rewards[lo:hi],
+                "terminals": a["terminated"][lo:hi],
+                "episode_seed": int(a["episode_seed"][e]),
+            }
+        )
+    with atomic_write(path, binary=True) as f:
+        pickle.dump(episodes, f, protocol=4)
+    return path
+
+
 def _infer_task(ep: Any, path: Path):
     try:
         widths = (len(ep["observations"]["observation"][0]), len(ep["actions"][0]))
@@ -119,6 +147,7 @@ def _episode(ep: Any, task: str, where: str) -> tuple[dict[str, Any], list[str],
         nxt = {k: np.asarray(ep["next_observations"][k], dtype=np.float32) for k in OBS_KEYS}
         terminals = np.asarray(ep["terminals"]).astype(bool).reshape(-1)
         rewards = np.asarray(ep["rewards"], dtype=np.float64).reshape(-1)
+        seed = int(ep.get("episode_seed", -1))  # gcdt's exports only
     except (KeyError, TypeError, ValueError) as err:
         raise GcdtError(f"{where}: malformed arrays ({err})") from None
     length = len(terminals)
@@ -146,7 +175,7 @@ def _episode(ep: Any, task: str, where: str) -> tuple[dict[str, Any], list[str],
         "terminated": terminated,
         "truncated": truncated,
         "success": success,
-        "episode_seed": -1,
+        "episode_seed": seed,
     }
     disagrees = bool((terminals != terminated).any())
     return converted, fits, disagrees

@@ -7,13 +7,16 @@ computation, so data whose rewards do not follow panda-gym's definition is refus
 than silently relabelled. gcdt's own metadata and episode seeds travel in the Minari
 metadata under the key "gcdt", which makes a round trip exact.
 
-Minari keeps datasets under `$MINARI_DATASETS_PATH` (default `~/.minari/datasets`).
+Minari keeps datasets under `$MINARI_DATASETS_PATH`; where it is unset, gcdt sets it to
+`<artifacts>/minari` (`gcdt.paths.minari_dir`) for itself and its child processes.
 """
 
 from __future__ import annotations
 
+import os
 import shutil
 import warnings
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -22,6 +25,7 @@ from gcdt.data.collect import from_episodes
 from gcdt.data.dataset import SCHEMA_VERSION, Dataset, check_rewards
 from gcdt.envs import OBS_KEYS, TASKS, check_reward, compute_rewards, env_id, is_success, make_env
 from gcdt.errors import GcdtError
+from gcdt.paths import MINARI_ENV, minari_dir
 from gcdt.provenance import utc_now
 
 
@@ -30,7 +34,24 @@ def _minari():
         import minari
     except ImportError:  # pragma: no cover - minari is in environment/requirements.txt
         raise GcdtError("Minari is not installed: pip install 'minari[hdf5]'") from None
+    # Minari reads the variable at every call: set, it makes gcdt and Minari agree.
+    os.environ.setdefault(MINARI_ENV, str(minari_dir()))
     return minari
+
+
+@dataclass(frozen=True)
+class MinariCard:
+    """The Minari metadata of a published dataset (see Minari's dataset standards); `gcdt`
+    is merged into the metadata's "gcdt" entry. The reference scores need both or neither."""
+
+    algorithm_name: str
+    description: str
+    code_permalink: str | None = None
+    requirements: tuple[str, ...] = ()
+    ref_min_score: float | None = None
+    ref_max_score: float | None = None
+    num_episodes_average_score: int | None = None
+    gcdt: dict[str, Any] = field(default_factory=dict)
 
 
 def default_minari_id(dataset: Dataset) -> str:
@@ -39,12 +60,20 @@ def default_minari_id(dataset: Dataset) -> str:
     return f"panda-gym/{dataset.task}/{policy}-v0"
 
 
-def _local_ids(minari) -> set[str]:
-    return set(minari.list_local_datasets(compatible_minari_version=False))
+def local_ids() -> set[str]:
+    """The ids of the Minari datasets in `gcdt.paths.minari_dir()`."""
+    return set(_minari().list_local_datasets(compatible_minari_version=False))
 
 
-def export_minari(dataset: Dataset, dataset_id: str | None = None, *, reward: str = "sparse"):
-    """Write `dataset` as the local Minari dataset `dataset_id`; returns the MinariDataset."""
+def export_minari(
+    dataset: Dataset,
+    dataset_id: str | None = None,
+    *,
+    reward: str = "sparse",
+    card: MinariCard | None = None,
+):
+    """Write `dataset` as the local Minari dataset `dataset_id`, with `card`'s metadata
+    (else a plain description); returns the MinariDataset."""
     minari = _minari()
     from minari.data_collector import EpisodeBuffer
     from minari.dataset.minari_dataset import parse_dataset_id
@@ -56,7 +85,7 @@ def export_minari(dataset: Dataset, dataset_id: str | None = None, *, reward: st
         parse_dataset_id(dataset_id)
     except Exception as err:
         raise GcdtError(f"invalid Minari dataset id {dataset_id!r}: {err}") from None
-    if dataset_id in _local_ids(minari):
+    if dataset_id in local_ids():
         raise GcdtError(
             f"Minari dataset {dataset_id!r} already exists: choose another id or delete it "
             f"(minari delete {dataset_id})"
@@ -83,6 +112,14 @@ def export_minari(dataset: Dataset, dataset_id: str | None = None, *, reward: st
             )
         )
 
+    card = card or MinariCard(
+        algorithm_name=(dataset.metadata.get("policy") or {}).get("name", "unknown"),
+        description=f"panda-gym {dataset.task} ({reward} reward) exported by gcdt",
+    )
+    scored = card.ref_max_score is not None
+    if scored != (card.ref_min_score is not None):
+        # Minari would fill a missing minimum with a random policy's score of its own.
+        raise GcdtError("a Minari card needs both reference scores or neither")
     env = make_env(dataset.task, reward)
     try:
         with warnings.catch_warnings():
@@ -91,9 +128,17 @@ def export_minari(dataset: Dataset, dataset_id: str | None = None, *, reward: st
                 dataset_id,
                 buffers,
                 env=env,
-                algorithm_name=(dataset.metadata.get("policy") or {}).get("name", "unknown"),
+                # The evaluation env is the dataset's own env spec (the reference scores').
+                eval_env=env.spec if scored else None,
+                algorithm_name=card.algorithm_name,
                 author="gcdt",
-                description=f"panda-gym {dataset.task} ({reward} reward) exported by gcdt",
+                code_permalink=card.code_permalink,
+                description=card.description,
+                requirements=list(card.requirements) or None,
+                ref_min_score=card.ref_min_score,
+                ref_max_score=card.ref_max_score,
+                # None where the scores average different episode counts (gcdt's entry has both).
+                num_episodes_average_score=card.num_episodes_average_score,
             )
             exported.storage.update_metadata(
                 {
@@ -103,6 +148,7 @@ def export_minari(dataset: Dataset, dataset_id: str | None = None, *, reward: st
                         "reward": reward,
                         "metadata": dataset.metadata,
                         "episode_seed": a["episode_seed"].tolist(),
+                        **card.gcdt,
                     }
                 }
             )
@@ -127,7 +173,7 @@ def _task_of(env_spec) -> tuple[str, str]:
 def import_minari(dataset_id: str) -> Dataset:
     """Read the local Minari dataset `dataset_id` into a validated `Dataset`."""
     minari = _minari()
-    if dataset_id not in _local_ids(minari):
+    if dataset_id not in local_ids():
         raise GcdtError(
             f"no local Minari dataset {dataset_id!r} (see `minari list local`; "
             "gcdt never downloads)"

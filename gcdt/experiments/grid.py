@@ -23,6 +23,7 @@ from gcdt import paper
 from gcdt.baselines.tqc_her import TQCConfig, load_tqc_config
 from gcdt.errors import GcdtError
 from gcdt.experiments.profiles import EVAL_SEED_STEP, Profile, target_seeds
+from gcdt.methods import OFFLINE_METHODS
 from gcdt.paths import REPO_ROOT
 
 if TYPE_CHECKING:
@@ -39,13 +40,7 @@ SECTIONS = ("table1", "rq4", "rq5", "ablation", "targets", "generalisation")
 GENERALISATION_METHODS = ("gcdt", "bc")
 #: The RunSpec fields of evaluation: runs that differ only in them share what they train.
 EVALUATION_FIELDS = ("eval_timesteps", "eval_seeds", "eval_envs", "target_return", "eval_region")
-#: Method name -> (trainer method, goal conditioning); `tqc` is the online baseline.
-OFFLINE_METHODS = {
-    "gcdt": ("dt", "desired+achieved"),
-    "dt": ("dt", "none"),
-    "dt-desired": ("dt", "desired"),
-    "bc": ("bc", "desired+achieved"),
-}
+#: The grid's methods: the offline ones (`gcdt.methods`), and `tqc`, the online baseline.
 METHODS = (*OFFLINE_METHODS, "tqc")
 TABLE1_METHODS = ("gcdt", "bc", "tqc")
 ABLATION_METHODS = ("dt", "dt-desired")

@@ -289,11 +289,11 @@ def _scope_text(section: str, scope: Scope) -> str:
 
 def deviations(profile: Profile) -> list[str]:
     """How `profile` differs from the paper's protocol, one plain sentence per difference."""
-    paper, p, out = PAPER, profile, []
-    if p.seeds != paper.seeds:
+    ref, p, out = PAPER, profile, []
+    if p.seeds != ref.seeds:
         seeds = f"{len(p.seeds)} seed" + ("s" if len(p.seeds) > 1 else "")
-        out.append(f"{seeds} per cell instead of {len(paper.seeds)}")
-    if p.expert != paper.expert:
+        out.append(f"{seeds} per cell instead of {len(ref.seeds)}")
+    if p.expert != ref.expert:
         noise = f", actions with Gaussian noise of std {p.expert_noise:g}" if p.expert_noise else ""
         if p.expert_noise and p.expert_labels == "clean":
             noise += " recorded with the clean action as label"
@@ -303,39 +303,39 @@ def deviations(profile: Profile) -> list[str]:
         )
     for task, path in p.expert_agents.items():
         out.append(f"{task}'s expert data collected by the published TQC+HER agent {path}")
-    if p.dataset_size != paper.dataset_size:
+    if p.dataset_size != ref.dataset_size:
         out.append(
             f"{p.dataset_size:,} transitions of expert (and of random) data instead of "
-            f"{paper.dataset_size:,}"
+            f"{ref.dataset_size:,}"
         )
     for name, section, label, fmt in (
         ("rq4_sizes", "rq4", "RQ4 subset sizes", "{:,}"),
         ("rq5_ratios", "rq5", "RQ5 expert ratios", "{:.0%}"),
     ):
-        ours, theirs = getattr(p, name), getattr(paper, name)
+        ours, theirs = getattr(p, name), getattr(ref, name)
         if ours != theirs and getattr(p, section).tasks:
             listed = [", ".join(fmt.format(v) for v in values) for values in (ours, theirs)]
             out.append(f"{label} {listed[0]} instead of {listed[1]}")
-    if p.train_steps != paper.train_steps:
+    if p.train_steps != ref.train_steps:
         steps = ", ".join(f"{t} {n:,}" for t, n in (p.train_steps or {}).items())
         out.append(
             f"offline training for a fixed number of gradient steps ({steps}) instead of "
             f"{paper.EPOCHS} epochs"
         )
-    if p.bc_budget != paper.bc_budget:
+    if p.bc_budget != ref.bc_budget:
         out.append(
-            f"BC trained with {BC_BUDGETS[p.bc_budget]} instead of {BC_BUDGETS[paper.bc_budget]}"
+            f"BC trained with {BC_BUDGETS[p.bc_budget]} instead of {BC_BUDGETS[ref.bc_budget]}"
         )
-    if p.learning_rate != paper.learning_rate:
+    if p.learning_rate != ref.learning_rate:
         out.append(
             f"offline training at learning rate {p.learning_rate:g} instead of "
-            f"{paper.learning_rate:g}, to fit the shorter budget"
+            f"{ref.learning_rate:g}, to fit the shorter budget"
         )
-    if p.eval_timesteps != paper.eval_timesteps:
+    if p.eval_timesteps != ref.eval_timesteps:
         out.append(
-            f"evaluation over {p.eval_timesteps:,} env steps instead of {paper.eval_timesteps:,}"
+            f"evaluation over {p.eval_timesteps:,} env steps instead of {ref.eval_timesteps:,}"
         )
-    if p.tqc_config != paper.tqc_config or p.tqc_budget:
+    if p.tqc_config != ref.tqc_config or p.tqc_budget:
         changes = {"config": p.tqc_config, **p.tqc_budget}
         out.append(
             "TQC+HER with changed budget values ("
@@ -350,14 +350,14 @@ def deviations(profile: Profile) -> list[str]:
             f"{loop.n_envs} envs side by side (the same algorithm and gradient steps per env "
             "step) instead of sb3-contrib's TQC on one env, as rl-baselines3-zoo runs it"
         )
-    if p.tqc_steps != paper.tqc_steps:
+    if p.tqc_steps != ref.tqc_steps:
         out.append(
             f"TQC+HER baseline trained for {p.tqc_steps:,} online steps instead of as many "
             "as the offline data has transitions"
         )
     for section in ("table1", "table1_tqc", "rq4", "rq5", "ablation"):
         scope = getattr(p, section)
-        if scope != getattr(paper, section):
+        if scope != getattr(ref, section):
             out.append(_scope_text(section, scope))
     return out
 

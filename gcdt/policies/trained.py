@@ -21,10 +21,11 @@ import numpy as np
 import torch
 
 from gcdt import paper
-from gcdt.checkpoint import build_model, load_checkpoint, method_label
+from gcdt.checkpoint import build_model, load_checkpoint
 from gcdt.device import resolve_device
 from gcdt.envs import goal_state
 from gcdt.errors import GcdtError
+from gcdt.methods import method_label
 from gcdt.models import state_columns
 from gcdt.policies.base import Policy
 

@@ -4,6 +4,7 @@
 * Fig. 2: the GC-DT architecture, drawn from a model config (`architecture_figure`).
 * Fig. 3 (RQ4): success rate against dataset size (`dataset_size_figure`).
 * Fig. 4 (RQ5): success rate against the share of expert data (`expert_ratio_figure`).
+* Beyond the paper: online steps against offline transitions (`online_offline_figure`).
 
 Fig. 2-4 and the learning curves read only the run results (`tables.load_runs`); Fig. 3 and 4
 draw one line per task, one panel per reward, the mean over seeds with its 95 % interval as
@@ -17,9 +18,16 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import pandas as pd
+from matplotlib.ticker import NullFormatter
 
 from gcdt.paths import figures_dir, write_if_changed
-from gcdt.report.tables import TASK_NAMES, curve_table
+from gcdt.report.tables import (
+    METHOD_NAMES,
+    TASK_NAMES,
+    aggregate,
+    curve_table,
+    load_agent_curves,
+)
 
 FORMATS = ("png", "pdf")
 
@@ -225,6 +233,71 @@ def tqc_learning_curves_figure(runs: pd.DataFrame) -> plt.Figure | None:
     )
 
 
+def online_offline_figure(
+    runs: pd.DataFrame, agents: pd.DataFrame | None = None, reward: str = "sparse"
+) -> plt.Figure | None:
+    """RQ1 at every budget: success against budget, one panel per task. TQC+HER's learning
+    curve over online env steps (the grid's runs, mean over seeds, and the published agents'
+    longer curves, `tables.load_agent_curves`) beside GC-DT and BC trained offline on that
+    many expert transitions (the Table 1 and RQ4 runs, 95 % intervals)."""
+    agents = load_agent_curves() if agents is None else agents
+    agents = agents[agents["reward"] == reward]
+    runs = runs[runs["reward"] == reward]
+    offline = runs[
+        runs["method"].isin(["gcdt", "bc"])
+        & (runs["expert_ratio"] == 1.0)
+        & runs["sections"].apply(lambda s: "table1" in s or "rq4" in s)
+    ]
+    online = runs[runs["method"] == "tqc"]
+    tasks = [t for t in TASK_NAMES if t in set(offline["task"]) | set(agents["task"])]
+    if not tasks:
+        return None
+    fig, axes = plt.subplots(
+        1, len(tasks), figsize=(4.6 * len(tasks), 3.8), squeeze=False, sharex=True, sharey=True
+    )
+    for ax, task in zip(axes[0], tasks, strict=True):
+        curves = [
+            pd.DataFrame(r.training["curve"])
+            for r in online[online["task"] == task].itertuples()
+            if r.training.get("curve")
+        ]
+        if curves:
+            mean = pd.concat(curves).groupby("env_steps")["success_rate"].mean()
+            ax.plot(
+                mean.index,
+                mean * 100,
+                color="tab:red",
+                label=f"TQC+HER, grid ({len(curves)} seeds)",
+            )
+        for _, curve in agents[agents["task"] == task].groupby("agent"):
+            ax.plot(
+                curve["env_steps"], curve["success_rate"] * 100, color="tab:red", ls="--",
+                label=f"TQC+HER, published agent (seed {curve['seed'].iloc[0]})",
+            )  # fmt: skip
+        task_runs = offline[offline["task"] == task]
+        for method, colour in (("gcdt", "tab:blue"), ("bc", "tab:green")):
+            sel = task_runs[task_runs["method"] == method]
+            if sel.empty:
+                continue
+            stats = aggregate(sel, ["size"]).sort_values("size")
+            m = stats["success_mean"].to_numpy()
+            ax.errorbar(
+                stats["size"], m, yerr=[m - stats["success_ci_low"], stats["success_ci_high"] - m],
+                marker="o", capsize=3, ls="", color=colour,
+                label=f"{METHOD_NAMES[method]}, offline on expert data",
+            )  # fmt: skip
+        ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())  # decades only: minor labels collide
+        ax.set_ylim(-5, 105)
+        ax.set_title(f"{TASK_NAMES[task]}, {reward} reward")
+        ax.set_xlabel("budget: online env steps / expert transitions")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="lower right")
+    axes[0][0].set_ylabel("Success rate (%)")
+    fig.tight_layout()
+    return fig
+
+
 def training_loss_figure(runs: pd.DataFrame) -> plt.Figure | None:
     """The offline training loss of Table 1's GC-DT and BC runs, from the stored curves."""
     table1 = runs[runs["sections"].apply(lambda s: "table1" in s)]
@@ -302,6 +375,7 @@ __all__ = [
     "expert_ratio_figure",
     "figures_dir",
     "learning_curves_figure",
+    "online_offline_figure",
     "rollout_figure",
     "save",
     "table1_architecture_figure",

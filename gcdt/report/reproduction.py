@@ -18,6 +18,7 @@ import pandas as pd
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
 from gcdt.experiments.profiles import Profile
+from gcdt.experiments.release import MANIFEST_NAME
 from gcdt.experiments.store import RunStore
 from gcdt.paths import REPO_ROOT, figures_dir, results_dir, write_if_changed
 from gcdt.report import tables
@@ -180,7 +181,8 @@ def publish(
         (figures_dir(profile.name, source_root), figures_dir(profile.name, published_root)),
     ):
         files = _mirrored(src)
-        for rel in sorted(_mirrored(dst) - files):
+        # The datasets' manifest is `make datasets`'s to write, not a reproduction's.
+        for rel in sorted(_mirrored(dst) - files - {Path(MANIFEST_NAME)}):
             (dst / rel).unlink()
             removed.append(dst / rel)
         for rel in sorted(files):

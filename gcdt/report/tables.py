@@ -8,6 +8,7 @@ laid out like the paper's table: rewards as blocks, methods as rows, tasks as co
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,6 +16,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from gcdt.baselines.publish import AGENTS_DIR
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
 from gcdt.experiments.profiles import Profile
@@ -86,6 +88,28 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
             f"`gcdt sweep --profile {profile.name}` (or `make reproduce PROFILE={profile.name}`)"
         )
     return pd.DataFrame(rows)
+
+
+def load_agent_curves(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:
+    """The learning curves of the published TQC+HER agents: one row per evaluation point
+    (task, reward, seed, env_steps, success_rate, mean_return, episodes, agent), read from
+    each agent's `run.json` (what it is) and `eval.csv` (its held-out curve)."""
+    frames = []
+    for run in sorted(Path(agents_dir).glob("tqc_*/run.json")):
+        record = json.loads(run.read_text())
+        curve = pd.read_csv(run.parent / "eval.csv")
+        frames.append(
+            curve.assign(
+                task=record["task"],
+                reward=record["reward"],
+                seed=record["seed"],
+                agent=run.parent.name,
+            )
+        )
+    columns = ["task", "reward", "seed", "env_steps", "success_rate", "mean_return", "episodes"]
+    if not frames:
+        return pd.DataFrame(columns=[*columns, "agent"])
+    return pd.concat(frames, ignore_index=True)[[*columns, "agent"]]
 
 
 def _pooled_std(evaluations: list[dict]) -> float:

@@ -1,0 +1,124 @@
+"""Publish a finished TQC+HER run as an agent others can use (`results/experts/tqc_*/`).
+
+A run leaves two models, the last one and the best one by its periodic evaluations. Picking
+the best by those same evaluations would flatter it, so both are measured again on fresh
+validation episodes and the better one is published; it is then measured once more, on held-out
+episodes that neither training, the periodic evaluations nor the validation saw. The folder
+holds `model.zip` (at most `MAX_ZIP_MIB`), the run's `eval.csv`, and its `run.json` extended
+with the curve and a `published` record of the choice and both measurements.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE
+from gcdt.baselines.tqc_her import BEST_MODEL_ZIP, EVAL_CSV, MODEL_ZIP, RUN_JSON
+from gcdt.errors import GcdtError
+from gcdt.paths import REPO_ROOT, write_json_atomic
+from gcdt.provenance import git_commit, utc_now
+
+AGENTS_DIR = REPO_ROOT / "results" / "experts"
+#: Episode seeds of the validation and of the held-out measurement: apart from each other and
+#: from training's and the periodic evaluations' (seeds 0-2 and 1000 and their streams).
+VALIDATION_SEED, HELD_OUT_SEED = 4000, 5000
+#: A published zip stays small enough for the repository.
+MAX_ZIP_MIB = 5.0
+CANDIDATES = {"final": MODEL_ZIP, "best": BEST_MODEL_ZIP}
+
+
+@dataclass(frozen=True)
+class PublishConfig:
+    """What `publish_agent` measures: episodes per validation and held-out evaluation."""
+
+    validation_episodes: int = 200
+    held_out_episodes: int = 500
+
+    def __post_init__(self) -> None:
+        for name in ("validation_episodes", "held_out_episodes"):
+            if getattr(self, name) < 1:
+                raise GcdtError(f"{name} must be >= 1, got {getattr(self, name)}")
+
+
+def agent_dir(task: str, reward: str, root: str | Path = AGENTS_DIR) -> Path:
+    """Where the agent of `task` with `reward` is published."""
+    return Path(root) / f"tqc_{task}_{reward}"
+
+
+def _finished_run(run: Path) -> dict[str, Any]:
+    """The run's record, refusing a folder that is not a finished `gcdt tqc train` run."""
+    if (run / CHECKPOINT_FILE).exists():
+        raise GcdtError(f"{run} holds an unfinished TQC+HER run: finish it with --resume first")
+    missing = [n for n in (RUN_JSON, EVAL_CSV, *CANDIDATES.values()) if not (run / n).is_file()]
+    if missing:
+        raise GcdtError(f"{run} is not a finished gcdt tqc train run: {', '.join(missing)} missing")
+    for name in CANDIDATES.values():
+        mib = (run / name).stat().st_size / 2**20
+        if mib > MAX_ZIP_MIB:
+            raise GcdtError(
+                f"{run / name} is {mib:.1f} MiB, over the {MAX_ZIP_MIB:g} MiB a published "
+                "agent may take: train it with a smaller net_arch"
+            )
+    return json.loads((run / RUN_JSON).read_text())
+
+
+def _measure(zip_path: Path, task: str, reward: str, episodes: int, seed: int) -> dict:
+    from gcdt.evaluation import evaluate  # imports torch and the envs: only when measuring
+    from gcdt.policies import make_policy
+
+    policy = make_policy(f"tqc:{zip_path}", task)
+    summary = evaluate(policy, task, reward, episodes=episodes, seed=seed, progress=False).summary
+    keep = ("success_rate", "mean_return", "std_return", "episodes", "timesteps")
+    return {"seed": seed, **{k: summary[k] for k in keep}}
+
+
+def publish_agent(
+    run: str | Path, out: str | Path | None = None, config: PublishConfig = PublishConfig()
+) -> Path:
+    """Publish the finished run in `run` (default folder: `agent_dir(task, reward)`); returns
+    the folder. An existing folder is refused: a published agent is replaced on purpose only."""
+    run = Path(run)
+    record = _finished_run(run)
+    task, reward = record["task"], record["reward"]
+    out = Path(out) if out is not None else agent_dir(task, reward)
+    if out.exists():
+        raise GcdtError(f"{out} already holds a published agent: remove it to replace it")
+    validation = {
+        name: _measure(run / zip_name, task, reward, config.validation_episodes, VALIDATION_SEED)
+        for name, zip_name in CANDIDATES.items()
+    }
+    # The better on validation; the final model on a tie (it has learned the longest).
+    chosen = max(
+        CANDIDATES,
+        key=lambda n: (validation[n]["success_rate"], validation[n]["mean_return"], n == "final"),
+    )
+    held_out = _measure(
+        run / CANDIDATES[chosen], task, reward, config.held_out_episodes, HELD_OUT_SEED
+    )
+    with open(run / EVAL_CSV, newline="") as f:
+        curve = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+    published = {
+        "model": chosen,
+        "validation": validation,
+        "held_out": held_out,
+        "created": utc_now(),
+        "git_commit": git_commit(),
+    }
+    # Built beside `out` and renamed into place: a stop leaves no half-published agent.
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        shutil.copyfile(run / CANDIDATES[chosen], staging / MODEL_ZIP)
+        shutil.copyfile(run / EVAL_CSV, staging / EVAL_CSV)
+        write_json_atomic(staging / RUN_JSON, {**record, "curve": curve, "published": published})
+        staging.rename(out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return out

@@ -1,0 +1,178 @@
+"""The README's results section, generated from the published results of one profile:
+`gcdt report --readme`, with the wall time `make reproduce` recorded (`record_reproduction`)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+from pathlib import Path
+
+from gcdt.errors import GcdtError
+from gcdt.experiments.profiles import PROFILES, Profile, deviations_text
+from gcdt.paths import (
+    OUTPUTS_ENV,
+    is_published,
+    outputs_root,
+    results_dir,
+    write_between_markers,
+    write_json_atomic,
+)
+from gcdt.report import figures, generalisation, tables, targets
+
+README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
+
+
+def record_reproduction(
+    profile: Profile, wall_seconds: float, backend: str, *, measured_at: dt.datetime | None = None
+) -> Path:
+    """Write results/<profile>/reproduce.json: how long `make reproduce` took, and where.
+
+    A reproduction that resumes an interrupted one finds some runs done: the record counts
+    them and their own run time, so that the wall time is never read as the whole work's.
+    `measured_at` is when `wall_seconds` was taken (default now): the reproduction started
+    `wall_seconds` before it, and a run that finished before that start was already done.
+    """
+    from gcdt.provenance import git_commit, machine_info, utc_now
+
+    if not wall_seconds >= 0:
+        raise GcdtError(f"wall time must be >= 0 seconds, got {wall_seconds}")
+    runs = tables.load_runs(profile)
+    started = (measured_at or dt.datetime.now(dt.UTC)) - dt.timedelta(seconds=wall_seconds)
+    seconds = [float(e.get("seconds", {}).get("total_seconds", 0.0)) for e in runs["execution"]]
+    earlier = [
+        s
+        for e, s in zip(runs["execution"], seconds, strict=True)
+        if "finished" in e and dt.datetime.fromisoformat(e["finished"]) < started
+    ]
+    record = {
+        "command": f"make reproduce PROFILE={profile.name} BACKEND={backend}",
+        "wall_seconds": round(float(wall_seconds), 1),
+        "finished": utc_now(),
+        "git_commit": git_commit(),
+        "runs": len(runs),
+        "run_seconds": round(sum(seconds), 1),  # the runs' own times added up: the work
+        "earlier_runs": len(earlier),  # already done when this reproduction started
+        "earlier_run_seconds": round(sum(earlier), 1),
+        "machine": machine_info(),
+    }
+    path = results_dir(profile.name) / "reproduce.json"
+    write_json_atomic(path, record)
+    return path
+
+
+def _wall_time_text(profile: Profile) -> str:
+    path = results_dir(profile.name) / "reproduce.json"
+    if not path.exists():
+        return "No wall time recorded: these results were not made by `make reproduce`."
+    record = json.loads(path.read_text())
+    minutes = record["wall_seconds"] / 60
+    machine = record["machine"]
+    where = (
+        f"on {machine['cores']} cores ({machine['cpu']}), {record['runs']} runs, finished "
+        f"{record['finished']} at commit {str(record['git_commit'])[:12]}."
+    )
+    if record.get("earlier_runs"):
+        # A resumed invocation's wall time is not the reproduction's: say which it is.
+        text = (
+            f"The last invocation of `{record['command']}` resumed an interrupted "
+            f"reproduction: {record['earlier_runs']} runs "
+            f"({record['earlier_run_seconds'] / 3600:.1f} h of their own time) were done "
+            f"before it, and it took **{minutes:.0f} min** for the rest (runs, notebooks and "
+            f"report; environment install excluded) {where}"
+        )
+    else:
+        text = (
+            f"Wall time of `{record['command']}` (runs, notebooks and report; environment "
+            f"install excluded): **{minutes:.0f} min** {where}"
+        )
+    if "run_seconds" in record:
+        text += f" The runs' own times add up to {record['run_seconds'] / 3600:.1f} h of work."
+    for other, count in _shared_runs(profile).items():
+        text += (
+            f" {count} of its run files are the `{other}` profile's, byte for byte: the same "
+            "run keys (the same specs), done once for both."
+        )
+    return text
+
+
+def _shared_runs(profile: Profile) -> dict[str, int]:
+    """Other profiles' results that hold some of `profile`'s run files, identical: how many."""
+    own = sorted((results_dir(profile.name) / "runs").glob("*.json"))
+    shared = {}
+    for other in PROFILES:
+        theirs = results_dir(other) / "runs"
+        if other == profile.name or not theirs.is_dir():
+            continue
+        count = sum(
+            1
+            for path in own
+            if (theirs / path.name).is_file()
+            and (theirs / path.name).read_bytes() == path.read_bytes()
+        )
+        if count:
+            shared[other] = count
+    return shared
+
+
+#: The README's figures, where the profile makes them, each followed by its numbers.
+README_FIGURES = {
+    "fig3_dataset_size": "Fig. 3: success rate vs dataset size (RQ4)",
+    "fig4_expert_ratio": "Fig. 4: success rate vs expert share (RQ5)",
+    "return_target": "Return-target study (ours): success vs the target return",
+    "goal_generalisation": (
+        "Goal generalisation (ours): success inside vs outside the training goals' region"
+    ),
+}
+
+
+def _points_markdown(fig: str, runs) -> str:
+    """The numbers behind one of README_FIGURES, as Markdown (success and 95 % interval over
+    seeds): the curve's points, the best target return, or success inside vs outside."""
+    if fig in tables.CURVES:
+        section, x = tables.CURVES[fig]
+        return tables.curve_markdown(tables.curve_table(runs, section, x), x)
+    if fig == "return_target":
+        return targets.best_targets_markdown(targets.best_targets(runs))
+    return generalisation.generalisation_markdown(generalisation.generalisation_table(runs))
+
+
+def readme_block(profile: Profile) -> str:
+    """The README's results section, all generated from results/<profile>/: Table 1 beside
+    the paper's values, where ours and the paper's point in different directions, the
+    ablation, Fig. 3 and 4 and the two studies' figures with their numbers, the wall time and
+    the profile's deviations."""
+    runs = tables.load_runs(profile)
+    name = profile.name
+    parts = [
+        f"Generated by `gcdt report --profile {name} --readme` from `results/{name}/`. "
+        + _wall_time_text(profile),
+        f"**Table 1** as reproduced by the `{name}` profile (return / success rate in %, "
+        "mean ± std over seeds, the success rate's 95 % bootstrap interval over seeds in "
+        "brackets; the paper's values in parentheses):",
+        tables.to_markdown(tables.table1(runs)),
+        "**Direction checks**: each comparison the paper's results make, with ours (success "
+        f"rates; differences under {tables.EQUAL_POINTS:g} point count as equal):",
+        tables.directions_markdown(runs),
+    ]
+    ablation = tables.ablation_table(runs)
+    if not ablation.empty:
+        parts += [
+            "**Goal-conditioning ablation** (ours; not in the paper), same data:",
+            tables.to_markdown(ablation, paper=False),
+        ]
+    for fig, caption in README_FIGURES.items():
+        if (figures.figures_dir(name) / f"{fig}.png").exists():
+            parts += [f"![{caption}](figures/{name}/{fig}.png)", _points_markdown(fig, runs)]
+    parts.append(deviations_text(profile))
+    return "\n\n".join(parts)
+
+
+def update_readme(profile: Profile, readme: Path) -> None:
+    """README's results block regenerated from the published results (rewritten only if it
+    changes). Refused for a reproduction's own folder: the README shows published numbers."""
+    if not is_published():
+        raise GcdtError(
+            f"--readme shows the published results, but results are read from "
+            f"{outputs_root()} (${OUTPUTS_ENV}): unset {OUTPUTS_ENV}, or publish first"
+        )
+    write_between_markers(readme, README_START, README_END, readme_block(profile))

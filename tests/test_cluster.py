@@ -168,11 +168,12 @@ def test_slurm_script_starts_ray_runs_the_sweep_and_stops_ray(tmp_path):
     )
     assert done.returncode == 3, done.stderr  # the sweep's status is the job's
     lines = done.stdout.splitlines()
-    assert f"ray head up at 127.0.0.1:{port}" in lines
-    assert (
-        f"cpus 1.0 sweep --profile smoke --backend ray --address 127.0.0.1:{port} "
-        "--no-progress --storage s3://b/gcdt"
-    ) in lines
-    assert lines[-1] == "ray stopped"
+    head = lines[0].removeprefix("ray head up at ")
+    assert head.endswith(f":{port}")
+    assert lines[1:] == [
+        f"cpus 1.0 sweep --profile smoke --backend ray --address {head} --no-progress "
+        "--storage s3://b/gcdt",
+        "ray stopped",
+    ]
     with pytest.raises(OSError):  # nothing listens on the head's port any more
-        socket.create_connection(("127.0.0.1", port), timeout=2).close()
+        socket.create_connection(head.rsplit(":", 1), timeout=2).close()

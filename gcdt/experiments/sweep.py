@@ -205,32 +205,47 @@ def sweep(
             runner: RayBackend | LocalBackend = RayBackend(profile, workers, address, storage)
         else:
             runner = LocalBackend(workers)
-        bar = progress_bar(
-            total=len(todo), desc=f"sweep {profile.name}", unit="run", progress=progress
-        )
         try:
-            for run in todo:
-                runner.submit(run)
-            tries: Counter[str] = Counter()
-            for run, result in runner.results():
-                if result["status"] != "done" and tries[run.key] < retries:
-                    tries[run.key] += 1
-                    summary.retried.append(f"{run.key}: {result['error']}")
-                    runner.submit(run)
-                    continue
-                store.write(run.key, result)
-                if result["status"] == "done":
-                    summary.done.append(run.key)
-                else:
-                    summary.failed.append(run.key)
-                    summary.errors[run.key] = result["error"]
-                bar.update(1)
-                bar.set_postfix(failed=len(summary.failed))
+            _run_all(runner, todo, store, summary, retries, progress)
         finally:
-            bar.close()
             runner.close()
     summary.seconds = time.perf_counter() - started
     return summary
+
+
+def _run_all(
+    runner: Any,
+    todo: list[PlannedRun],
+    store: RunStore,
+    summary: SweepSummary,
+    retries: int,
+    progress: bool,
+) -> None:
+    """Run `todo` on `runner` (a backend), each failed run again up to `retries` times; write
+    each final result into `store` and record it in `summary`."""
+    bar = progress_bar(
+        total=len(todo), desc=f"sweep {summary.profile}", unit="run", progress=progress
+    )
+    try:
+        for run in todo:
+            runner.submit(run)
+        tries: Counter[str] = Counter()
+        for run, result in runner.results():
+            if result["status"] != "done" and tries[run.key] < retries:
+                tries[run.key] += 1
+                summary.retried.append(f"{run.key}: {result['error']}")
+                runner.submit(run)
+                continue
+            store.write(run.key, result)
+            if result["status"] == "done":
+                summary.done.append(run.key)
+            else:
+                summary.failed.append(run.key)
+                summary.errors[run.key] = result["error"]
+            bar.update(1)
+            bar.set_postfix(failed=len(summary.failed))
+    finally:
+        bar.close()
 
 
 def rerun_command(

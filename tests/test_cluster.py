@@ -16,14 +16,15 @@ import yaml
 
 from gcdt.experiments import artifacts, build_grid
 from gcdt.experiments.profiles import PAPER
-from gcdt.experiments.storage import STORAGE_ENV
+from gcdt.experiments.storage import STORAGE_ENV, ArtifactStorage
 from gcdt.paths import REPO_ROOT
 from tests.test_experiments import TINY
 
 
 def test_artifacts_made_on_one_node_are_fetched_from_the_storage_uri(tmp_path, monkeypatch):
     storage = tmp_path / "storage"
-    storage.mkdir()
+    ArtifactStorage(storage.as_uri()).check_writable()  # makes the folder, leaves it empty
+    assert storage.is_dir() and not list(storage.iterdir())
     monkeypatch.setenv(STORAGE_ENV, storage.as_uri())
     spec = next(e.spec for e in build_grid(TINY, only="table1") if e.spec.method == "gcdt")
     monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "node0"))

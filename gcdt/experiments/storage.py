@@ -52,6 +52,8 @@ class ArtifactStorage:
         fs, root = self._fs()
         probe = f"{root}/.gcdt-write-check-{secrets.token_hex(4)}"
         try:
+            if "file" in fs.protocol:  # a local folder is made, as the artifacts folder is
+                fs.makedirs(root, exist_ok=True)
             fs.pipe_file(probe, b"")
             fs.rm_file(probe)
         except Exception as err:  # any backend's refusal: permission, missing bucket, ...

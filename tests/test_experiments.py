@@ -390,6 +390,21 @@ def test_multi_node_sweep_survives_a_lost_node(local_sweep, tmp_path, monkeypatc
     assert not [p for p in tmp_path.glob("node*/**/*.json") if p.name in results]
 
 
+def test_local_ray_instance_writes_the_same_results(local_sweep, tmp_path, monkeypatch):
+    pytest.importorskip("ray")
+    monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))  # trains from scratch
+    runs = tmp_path / "runs"
+    summary = sweep(TINY, backend="ray", only="table1", store_root=runs, workers=2, progress=False)
+    assert summary.ok and len(summary.done) >= 2
+    assert _results(runs) == {
+        name: r
+        for name, r in _results(local_sweep[0] / "runs").items()
+        if runs.joinpath(name).exists()
+    }
+    # The instance's workers made the artifacts in the driver's folder (one machine).
+    assert list((tmp_path / "artifacts" / "grid" / "datasets").glob("*.npz"))
+
+
 def test_corrupt_and_foreign_results_are_reported_and_rerun(local_sweep, tmp_path, monkeypatch):
     root, _ = local_sweep
     runs = tmp_path / "runs"

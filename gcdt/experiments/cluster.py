@@ -2,10 +2,11 @@
 
 Each run asks for the profile's `cpus_per_run` CPUs (and `gpus_per_run` of a GPU where the
 cluster has GPUs, so several small runs share one). A task returns its run's result to the
-driver, which alone writes the run store: the nodes need no shared filesystem. Each node keeps
-its artifacts in its own `$GCDT_ARTIFACTS` (made there when needed), or shares them through a
-storage URI (`gcdt.experiments.storage`); a shared folder still works: point every node's
-`$GCDT_ARTIFACTS` at it.
+driver, which alone writes the run store: the nodes need no shared filesystem. On a cluster
+(`address`) each node keeps its artifacts in its own `$GCDT_ARTIFACTS` (made there when
+needed), or shares them through a storage URI (`gcdt.experiments.storage`); a shared folder
+still works: point every node's `$GCDT_ARTIFACTS` at it. A local Ray instance uses the
+driver's artifacts folder.
 
 A run whose worker or node dies comes back as a `failed` result (`runner.lost_result`) that the
 sweep retries like any other failure; Ray's own retries are off so that one count holds.
@@ -20,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from gcdt.errors import GcdtError
 from gcdt.experiments.runner import lost_result, run_result
+from gcdt.paths import artifacts_dir
 
 if TYPE_CHECKING:
     from gcdt.experiments.profiles import Profile
@@ -75,6 +77,8 @@ class RayBackend:
             raise GcdtError("the ray backend needs Ray: pip install 'ray==2.60.0'") from None
         self._ray = ray
         self._storage = storage
+        # A local Ray instance is this machine: its workers use the driver's artifacts folder.
+        self._artifacts = str(artifacts_dir().resolve()) if address is None else None
         self._started_here = not ray.is_initialized()
         if self._started_here:
             # Ray's connection chatter would bury the sweep's own one-line messages.
@@ -99,7 +103,10 @@ class RayBackend:
 
     def submit(self, run: PlannedRun) -> None:
         spec = run.entry.spec.to_dict()
-        self._pending[self._task.remote(spec, self.name, storage=self._storage)] = run
+        ref = self._task.remote(
+            spec, self.name, artifacts_root=self._artifacts, storage=self._storage
+        )
+        self._pending[ref] = run
 
     def results(self) -> Iterator[tuple[PlannedRun, dict[str, Any]]]:
         while self._pending:

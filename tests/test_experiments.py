@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import json
 import os
 import signal
@@ -351,6 +352,14 @@ def test_multi_node_sweep_survives_a_lost_node(local_sweep, tmp_path, monkeypatc
         monkeypatch.setenv("GCDT_ARTIFACTS", str(driver_artifacts))
         cluster.wait_for_nodes()
         runs, outcome = tmp_path / "runs", {}
+        # Every run node 0 starts waits on its first artifact's lock, held here: when node 0
+        # is lost, a run is in flight there for certain.
+        locks = tmp_path / "node0" / "grid" / "locks"
+        locks.mkdir(parents=True)
+        firsts = {(e.spec.tqc if e.spec.tqc else e.spec.data).key() for e in build_grid(TINY)}
+        held = [open(locks / f"{key}.lock", "w") for key in firsts]
+        for f in held:
+            fcntl.flock(f, fcntl.LOCK_EX)
 
         def drive():
             try:
@@ -362,14 +371,13 @@ def test_multi_node_sweep_survives_a_lost_node(local_sweep, tmp_path, monkeypatc
 
         thread = threading.Thread(target=drive)
         thread.start()
-        # Node 0 is lost once a run has finished and node 0 has started work: 12 runs are
-        # queued or running then, one of them on node 0.
+        # Node 0 is lost once node 1 has finished a run (node 0 took one at the start).
         deadline = time.monotonic() + 300
-        while time.monotonic() < deadline and not (
-            list(runs.glob("*.json")) and (tmp_path / "node0" / "grid").exists()
-        ):
+        while time.monotonic() < deadline and not list(runs.glob("*.json")):
             time.sleep(0.1)
         cluster.remove_node(nodes[0])
+        for f in held:
+            f.close()
         thread.join(timeout=600)
     finally:
         ray.shutdown()

@@ -24,7 +24,7 @@ from gcdt.errors import GcdtError
 from gcdt.evaluation import DEFAULT_TIMESTEPS, EvaluationConfig
 from gcdt.experiments.grid import SECTIONS
 from gcdt.experiments.profiles import PROFILES
-from gcdt.experiments.sweep import BACKENDS
+from gcdt.experiments.sweep import BACKENDS, RETRIES
 from gcdt.paths import check_writable, write_json_atomic
 from gcdt.policies import POLICY_NAMES, POLICY_SPECS, TQC_PREFIX
 
@@ -759,6 +759,17 @@ def _sweep_parser(sub: argparse._SubParsersAction) -> None:
     sw.add_argument("--profile", required=True, choices=list(PROFILES))
     sw.add_argument("--backend", default="local", choices=list(BACKENDS))
     sw.add_argument("--address", help="Ray cluster address HOST:PORT (default: a local Ray)")
+    sw.add_argument(
+        "--storage",
+        help="URI the Ray nodes share artifacts through, e.g. s3://bucket/gcdt (default: each "
+        "node makes its own in its $GCDT_ARTIFACTS)",
+    )
+    sw.add_argument(
+        "--retries",
+        type=_int_at_least(0),
+        default=RETRIES,
+        help=f"times a failed run is tried again (default {RETRIES})",
+    )
     sw.add_argument("--only", choices=list(SECTIONS), help="one section of the grid")
     sw.add_argument("--workers", type=_positive_int, help="parallel runs (default: cores)")
     sw.add_argument(
@@ -803,13 +814,15 @@ def _sweep(args: argparse.Namespace) -> int:
         profile,
         backend=args.backend,
         address=args.address,
+        storage=args.storage,
+        retries=args.retries,
         only=args.only,
         workers=args.workers,
         progress=not args.no_progress,
     )
     for warning in summary.warnings:
         print(f"warning: {warning}", file=sys.stderr)
-    print(summary.line())
+    print("\n".join(summary.lines()))
     return 0 if summary.ok else 1
 
 

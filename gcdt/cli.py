@@ -28,7 +28,7 @@ from gcdt.errors import GcdtError
 from gcdt.evaluation import EvaluationConfig
 from gcdt.experiments.grid import SECTIONS
 from gcdt.experiments.profiles import PROFILES
-from gcdt.experiments.sweep import BACKENDS
+from gcdt.experiments.sweep import BACKENDS, RETRIES
 from gcdt.paths import check_writable, write_json_atomic
 from gcdt.policies import POLICY_NAMES, POLICY_SPECS, TQC_PREFIX
 from gcdt.regions import GoalRegion
@@ -628,6 +628,12 @@ class Sweep(_Command, _Progress):
     profile: str = setting(REQUIRED, _PROFILE_HELP, choices=PROFILES)
     backend: str = setting("local", "a process pool, or Ray", choices=BACKENDS)
     address: str | None = setting(None, "Ray cluster address HOST:PORT (default: a local Ray)")
+    storage: str | None = setting(
+        None,
+        "URI the Ray nodes share artifacts through, e.g. s3://bucket/gcdt (default: each node "
+        "makes its own in its $GCDT_ARTIFACTS)",
+    )
+    retries: int = setting(RETRIES, "times a failed run is tried again", minimum=0)
     only: str | None = setting(None, "one section of the grid", choices=SECTIONS)
     workers: int | None = setting(None, "parallel runs (default: cores)", minimum=1)
     dry_run: bool = setting(False, "list the runs, their state and estimated cost")
@@ -647,13 +653,15 @@ class Sweep(_Command, _Progress):
             profile,
             backend=self.backend,
             address=self.address,
+            storage=self.storage,
+            retries=self.retries,
             only=self.only,
             workers=self.workers,
             progress=not self.no_progress,
         )
         for warning in summary.warnings:
             print(f"warning: {warning}", file=sys.stderr)
-        print(summary.line())
+        print("\n".join(summary.lines()))
         return 0 if summary.ok else 1
 
     def _dry_run(self, profile) -> int:

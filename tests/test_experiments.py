@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import json
 import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -330,17 +332,85 @@ def test_evaluation_never_replays_a_training_instance(local_sweep):
     assert not trained & evaluated
 
 
-def test_ray_backend_writes_the_same_results(local_sweep, tmp_path, monkeypatch):
+def test_multi_node_sweep_survives_a_lost_node(local_sweep, tmp_path, monkeypatch):
+    """A head and two worker nodes (separate raylets), no shared filesystem: each node makes
+    its artifacts in its own folder, the driver alone writes the store. One worker node is
+    lost mid-sweep; its run is retried on the other, and the results equal a local sweep's."""
+    ray = pytest.importorskip("ray")
+    from ray.cluster_utils import Cluster
+
+    driver_artifacts = tmp_path / "driver-artifacts"  # no run may touch the driver's folder
+    # The head runs the driver alone, as on a real cluster: runs go to the worker nodes.
+    cluster = Cluster(
+        initialize_head=True, head_node_args={"num_cpus": 0, "include_dashboard": False}
+    )
+    try:
+        nodes = []
+        for i in range(2):  # a node's processes inherit the environment it starts with
+            monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / f"node{i}"))
+            nodes.append(cluster.add_node(num_cpus=1))
+        monkeypatch.setenv("GCDT_ARTIFACTS", str(driver_artifacts))
+        cluster.wait_for_nodes()
+        runs, outcome = tmp_path / "runs", {}
+        # Every run node 0 starts waits on its first artifact's lock, held here: when node 0
+        # is lost, a run is in flight there for certain.
+        locks = tmp_path / "node0" / "grid" / "locks"
+        locks.mkdir(parents=True)
+        firsts = {(e.spec.tqc if e.spec.tqc else e.spec.data).key() for e in build_grid(TINY)}
+        held = [open(locks / f"{key}.lock", "w") for key in firsts]
+        for f in held:
+            fcntl.flock(f, fcntl.LOCK_EX)
+
+        def drive():
+            try:
+                outcome["summary"] = sweep(
+                    TINY, backend="ray", address=cluster.address, store_root=runs, progress=False
+                )
+            except BaseException as err:  # re-raised below, in the test's thread
+                outcome["error"] = err
+
+        thread = threading.Thread(target=drive)
+        thread.start()
+        # Node 0 is lost once node 1 has finished a run (node 0 took one at the start).
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and not list(runs.glob("*.json")):
+            time.sleep(0.1)
+        cluster.remove_node(nodes[0])
+        for f in held:
+            f.close()
+        thread.join(timeout=600)
+    finally:
+        ray.shutdown()
+        cluster.shutdown()
+    if "error" in outcome:
+        raise outcome["error"]
+    summary = outcome["summary"]
+    print(summary.line())  # the run counts of a sweep that lost a node
+    assert summary.ok and len(summary.done) == 13 and not summary.skipped
+    assert summary.retried and all("Error" in r for r in summary.retried)
+    assert _results(runs) == _results(local_sweep[0] / "runs")
+    assert sorted(p.name for p in runs.iterdir()) == sorted(f"{k}.json" for k in summary.done)
+    assert {json.loads(p.read_text())["execution"]["backend"] for p in runs.iterdir()} == {"ray"}
+    assert not driver_artifacts.exists()
+    # The surviving node made the artifacts it needed itself; no node wrote a result file.
+    assert list((tmp_path / "node1" / "grid" / "datasets").glob("*.npz"))
+    results = {f"{k}.json" for k in summary.done}
+    assert not [p for p in tmp_path.glob("node*/**/*.json") if p.name in results]
+
+
+def test_local_ray_instance_writes_the_same_results(local_sweep, tmp_path, monkeypatch):
     pytest.importorskip("ray")
     monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))  # trains from scratch
-    summary = sweep(TINY, backend="ray", store_root=tmp_path / "runs", workers=2, progress=False)
-    assert summary.ok and len(summary.done) == 13
-    assert _results(tmp_path / "runs") == _results(local_sweep[0] / "runs")
-    backends = {
-        json.loads(p.read_text())["execution"]["backend"]
-        for p in (tmp_path / "runs").glob("*.json")
+    runs = tmp_path / "runs"
+    summary = sweep(TINY, backend="ray", only="table1", store_root=runs, workers=2, progress=False)
+    assert summary.ok and len(summary.done) >= 2
+    assert _results(runs) == {
+        name: r
+        for name, r in _results(local_sweep[0] / "runs").items()
+        if runs.joinpath(name).exists()
     }
-    assert backends == {"ray"}
+    # The instance's workers made the artifacts in the driver's folder (one machine).
+    assert list((tmp_path / "artifacts" / "grid" / "datasets").glob("*.npz"))
 
 
 def test_corrupt_and_foreign_results_are_reported_and_rerun(local_sweep, tmp_path, monkeypatch):
@@ -372,8 +442,17 @@ def test_failing_run_is_recorded_and_the_others_complete(local_sweep, tmp_path, 
     assert failed["status"] == "failed" and failed["spec"]["method"] == "tqc"
     assert "eval_every must be an integer >= 1, got 0" in failed["error"]
     assert "Traceback" in failed["traceback"]
-    retry = sweep(broken, store_root=tmp_path, workers=2, progress=False)
+    # Tried RETRIES more times in the sweep, then listed with the command that re-runs it.
+    assert summary.retried == [f"{summary.failed[0]}: {failed['error']}"] * 2
+    lines, label = (
+        summary.lines(),
+        next(p.entry.spec.label for p in summary.planned if p.key == summary.failed[0]),
+    )
+    assert lines[1] == f"failed: {summary.failed[0]} {label}: {failed['error']}"
+    assert lines[2].endswith(": gcdt sweep --profile tiny")
+    retry = sweep(broken, store_root=tmp_path, workers=2, retries=0, progress=False)
     assert retry.failed == summary.failed and len(retry.skipped) == 12  # failed runs re-run
+    assert not retry.retried and retry.lines()[2].endswith("gcdt sweep --profile tiny --retries 0")
 
 
 DRIVER = """

@@ -9,6 +9,9 @@ exclusive file lock per artifact stops two workers (processes or Ray tasks on on
 nodes sharing the folder) from making it twice; each is written atomically, so a killed
 worker leaves no half artifact behind. The sparse and dense variants of a task share one
 collection (both rewards are stored).
+
+Under a storage URI (`gcdt.experiments.storage`, a cluster without a shared filesystem) an
+artifact missing here is first looked for there, and one made here is uploaded there.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from gcdt.baselines.tqc_her import (
 from gcdt.data import Dataset, collect, load_dataset, mix, subset
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import DataSpec, RunSpec, TQCSpec, file_digest
+from gcdt.experiments.storage import run_storage
 from gcdt.paths import REPO_ROOT, artifacts_dir
 from gcdt.regions import GoalRegion
 
@@ -40,6 +44,20 @@ if TYPE_CHECKING:
 
 def grid_dir() -> Path:
     return artifacts_dir() / "grid"
+
+
+def _fetched(names: list[str]) -> bool:
+    """Whether artifact `names` (relative to the grid folder, completion mark last) came
+    from the run's storage URI; False without one."""
+    storage = run_storage()
+    return storage is not None and storage.fetch(grid_dir(), names)
+
+
+def _publish(names: list[str]) -> None:
+    """Upload artifact `names` (those that exist, completion mark last) to the run's storage."""
+    storage = run_storage()
+    if storage is not None:
+        storage.publish(grid_dir(), [n for n in names if (grid_dir() / n).exists()])
 
 
 @contextlib.contextmanager
@@ -59,8 +77,11 @@ def tqc_agent(spec: TQCSpec) -> Path:
     """The final model zip of TQC+HER run `spec`, trained first if it does not exist yet."""
     out = grid_dir() / "tqc" / spec.key()
     model = out / MODEL_ZIP
+    # RUN_JSON is written last: without it the run did not finish.
+    names = [f"tqc/{spec.key()}/{name}" for name in RUN_FILES if name != RUN_JSON]
+    names.append(f"tqc/{spec.key()}/{RUN_JSON}")
     with _locked(spec.key()):
-        if not (out / RUN_JSON).exists():  # written last: without it the run did not finish
+        if not (out / RUN_JSON).exists() and not _fetched(names):
             resume = (out / CHECKPOINT_FILE).exists()  # an interrupted run carries on from it
             if not resume:
                 for name in RUN_FILES:  # what a run interrupted before its first checkpoint left
@@ -76,14 +97,16 @@ def tqc_agent(spec: TQCSpec) -> Path:
                 progress=False,
                 resume=resume,
             )
+            _publish(names)
     return model
 
 
 def dataset(spec: DataSpec) -> Dataset:
     """Dataset `spec`, made (collected, or drawn from its collections) if it does not exist."""
-    path = grid_dir() / "datasets" / f"{spec.key()}.npz"
+    name = f"datasets/{spec.key()}.npz"
+    path = grid_dir() / name
     with _locked(spec.key()):
-        if path.exists():
+        if path.exists() or _fetched([name]):
             return load_dataset(path)
         if spec.is_base:
             made = _collect(spec)
@@ -101,6 +124,7 @@ def dataset(spec: DataSpec) -> Dataset:
                 )
         made = made.with_metadata(grid_spec=spec.key())
         made.save(path)
+        _publish([name])
     return made
 
 
@@ -155,9 +179,14 @@ def checkpoint(spec: RunSpec) -> Path:
 
     out = checkpoint_dir(spec)
     path = out / CHECKPOINT_NAME
+    # Only a complete checkpoint is uploaded: its presence there marks it finished.
+    name = str(path.relative_to(grid_dir()))
     with _locked(spec.training_key()):
         ckpt = load_checkpoint(path) if path.exists() else None
+        if (ckpt is None or not ckpt["complete"]) and _fetched([name]):
+            ckpt = load_checkpoint(path)
         if ckpt is None or not ckpt["complete"]:
             cfg = spec.train_config()  # the config the run's key hashes
             train(dataset(spec.data), cfg, out, resume=ckpt is not None, progress=False)
+            _publish([name])
     return path

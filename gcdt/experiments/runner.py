@@ -1,10 +1,11 @@
-"""One run of the grid, start to finish: data, training, evaluation, result file.
+"""One run of the grid, start to finish: data, training, evaluation, result.
 
-`execute_run` is what every backend calls (a local worker process or a Ray task). It never
-raises for a failing run: the error and traceback go into the run's result file, marked
-`failed`, and the next sweep retries it. The result holds only what the run's config
-determines (spec, metrics, evaluations) apart from the `execution` block (timings, host,
-backend, versions), so two backends produce the same files apart from that block.
+`run_result` is what every backend calls (a local worker process or a Ray task on any node):
+it returns the run's result, which the sweep's driver alone writes into the run store, so the
+workers need no access to it. It never raises for a failing run: the error and traceback go
+into the result, marked `failed`, and the sweep retries it. The result holds only what the
+run's config determines (spec, metrics, evaluations) apart from the `execution` block
+(timings, host, backend, versions), so two backends produce the same files apart from it.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 from gcdt.baselines.tqc_her import ALL_TQC_PACKAGES, RUN_JSON
 from gcdt.experiments import artifacts
 from gcdt.experiments.grid import RUN_SCHEMA, RunSpec
+from gcdt.experiments.storage import STORAGE_ENV
 from gcdt.experiments.store import RunStore
 from gcdt.paths import ARTIFACTS_ENV
 from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_now
@@ -33,14 +35,33 @@ TQC_CURVE_FIELDS = ("env_steps", "success_rate", "mean_return", "episodes")
 def execute_run(
     spec_dict: dict[str, Any], store_root: str, artifacts_root: str, backend: str
 ) -> str:
-    """Run `spec_dict` (a `RunSpec.to_dict()`), write its result; return "done" or "failed".
+    """Run `spec_dict` (a `RunSpec.to_dict()`) with `artifacts_root`, write its result into
+    the store at `store_root`; return "done" or "failed"."""
+    result = run_result(spec_dict, backend, artifacts_root=artifacts_root)
+    RunStore(store_root).write(result["key"], result)
+    return result["status"]
 
-    `artifacts_root` is the driver's artifacts folder: workers share it, whatever their
-    environment says.
+
+def run_result(
+    spec_dict: dict[str, Any],
+    backend: str,
+    *,
+    artifacts_root: str | None = None,
+    storage: str | None = None,
+) -> dict[str, Any]:
+    """Run `spec_dict` (a `RunSpec.to_dict()`); its result, "done" or "failed".
+
+    Artifacts live in `artifacts_root` (None: this node's own, `$GCDT_ARTIFACTS` where the
+    run executes) and, with a `storage` URI, are shared through it.
     """
     import torch
 
-    os.environ[ARTIFACTS_ENV] = artifacts_root
+    if artifacts_root is not None:
+        os.environ[ARTIFACTS_ENV] = artifacts_root
+    if storage:
+        os.environ[STORAGE_ENV] = storage
+    else:  # a pooled worker may have run a task of a sweep with storage before
+        os.environ.pop(STORAGE_ENV, None)
     spec = RunSpec.from_dict(spec_dict)
     key = spec.key()
     torch.set_num_threads(spec.threads)
@@ -60,18 +81,39 @@ def execute_run(
         result["error"] = f"{type(err).__name__}: {err}".splitlines()[0]
         result["traceback"] = traceback.format_exc()
     timings["total_seconds"] = round(time.perf_counter() - clock, 3)
-    result["execution"] = {
+    result["execution"] = _execution(backend, started, timings, torch.get_num_threads())
+    return result
+
+
+def lost_result(spec_dict: dict[str, Any], backend: str, error: str, trace: str) -> dict[str, Any]:
+    """The `failed` result of a run whose worker or node died before it returned one."""
+    spec = RunSpec.from_dict(spec_dict)
+    return {
+        "key": spec.key(),
+        "schema": RUN_SCHEMA,
+        "spec": spec.to_dict(),
+        "status": "failed",
+        "error": error,
+        "traceback": trace,
+        # Written by the driver: the host that lost the run is in `error`, not this block.
+        "execution": {**_execution(backend, None, {}, None), "host": None},
+    }
+
+
+def _execution(
+    backend: str, started: str | None, timings: dict[str, float], threads: int | None
+) -> dict[str, Any]:
+    """Where and how a run executed: the one block of a result that its config does not set."""
+    return {
         "backend": backend,
         "host": platform.node(),
         "started": started,
         "finished": utc_now(),
         "seconds": timings,
-        "torch_threads": torch.get_num_threads(),
+        "torch_threads": threads,
         "git_commit": git_commit(),
         "versions": package_versions((*TRACKED_PACKAGES, *ALL_TQC_PACKAGES)),
     }
-    RunStore(store_root).write(key, result)
-    return result["status"]
 
 
 def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict[str, Any]]:

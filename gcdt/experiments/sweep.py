@@ -1,26 +1,28 @@
 """Run a profile's grid on a backend, skipping finished runs: `gcdt sweep`.
 
-Backends (both call `runner.execute_run`, so both write the same result files):
+Backends (both call `runner.run_result` and hand its result back to this driver, which alone
+writes the run store, so both write the same result files):
 
 * `local` (default): a process pool with one worker per `cpus_per_run` cores;
-* `ray`: one Ray task per run with `cpus_per_run` CPUs (and `gpus_per_run` of a GPU where the
-  cluster has GPUs, so several small runs share one), on a local Ray instance or, with
-  `address`, on an existing cluster. Workers then need the repository and the artifacts
-  folder at the same paths (a shared file system).
+* `ray`: one Ray task per run on a local Ray instance or, with `address`, on a cluster of any
+  number of nodes with no shared filesystem (`gcdt.experiments.cluster`).
 
 A sweep reads the store first: runs with a valid `done` result are skipped; failed, missing
-and untrusted (corrupt or foreign) results are run. It ends with a summary, and the CLI exits
-non-zero when any run failed.
+and untrusted (corrupt or foreign) results are run. A run that fails (its worker or node lost
+included) is tried again up to `retries` times, then recorded as failed with its traceback.
+The summary lists the failed runs and the command that re-runs them; the CLI exits non-zero
+when any run failed.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import os
-import socket
+import shlex
 import time
-from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections import Counter
+from collections.abc import Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,13 +33,15 @@ from gcdt.errors import GcdtError
 from gcdt.experiments.costs import CostModel
 from gcdt.experiments.grid import GridEntry, build_grid
 from gcdt.experiments.profiles import Profile
-from gcdt.experiments.runner import execute_run
+from gcdt.experiments.runner import lost_result, run_result
+from gcdt.experiments.storage import ArtifactStorage
 from gcdt.experiments.store import RunStore
 from gcdt.paths import artifacts_dir, results_dir
 from gcdt.progress import progress_bar
 
 BACKENDS = ("local", "ray")
-RAY_CONNECT_TIMEOUT = 5.0  # seconds to reach a cluster's address before giving up
+#: Times a failed run is tried again within one sweep before it is recorded as failed.
+RETRIES = 2
 
 
 @dataclass
@@ -57,6 +61,9 @@ class SweepSummary:
     failed: list[str] = field(default_factory=list)  # run by this sweep, failed
     skipped: list[str] = field(default_factory=list)  # already done before
     warnings: list[str] = field(default_factory=list)  # corrupt or foreign result files
+    retried: list[str] = field(default_factory=list)  # "KEY: error" of each failed try retried
+    errors: dict[str, str] = field(default_factory=dict)  # failed run -> its error line
+    rerun: str = ""  # the command that runs this sweep's failed runs again
     seconds: float = 0.0
 
     @property
@@ -64,10 +71,23 @@ class SweepSummary:
         return not self.failed
 
     def line(self) -> str:
+        retried = f", {len(self.retried)} retried" if self.retried else ""
         return (
             f"sweep {self.profile}: {len(self.done)} done, {len(self.skipped)} skipped, "
-            f"{len(self.failed)} failed ({self.seconds:.0f} s)"
+            f"{len(self.failed)} failed{retried} ({self.seconds:.0f} s)"
         )
+
+    def lines(self) -> list[str]:
+        """`line()`, then each failed run with its error and the command that re-runs them."""
+        if not self.failed:
+            return [self.line()]
+        labels = {p.key: p.entry.spec.label for p in self.planned}
+        failed = [f"failed: {k} {labels.get(k, '')}: {self.errors.get(k, '')}" for k in self.failed]
+        return [
+            self.line(),
+            *failed,
+            f"re-run the failed runs (tracebacks in their result files): {self.rerun}",
+        ]
 
 
 def plan(
@@ -142,107 +162,154 @@ def sweep(
     *,
     backend: str = "local",
     address: str | None = None,
+    storage: str | None = None,
+    retries: int = RETRIES,
     only: str | None = None,
     methods: Sequence[str] | None = None,
     workers: int | None = None,
     store_root: str | Path | None = None,
     progress: bool = True,
 ) -> SweepSummary:
-    """Run every run of `profile` (of section `only`, of `methods`) not done yet."""
+    """Run every run of `profile` (of section `only`, of `methods`) not done yet.
+
+    Bad input (backend, an unreachable `address`, a cluster too small for one run, a `storage`
+    URI that cannot be written) is refused before anything is written.
+    """
     if backend not in BACKENDS:
         raise GcdtError(f"unknown backend {backend!r}: expected one of {', '.join(BACKENDS)}")
-    if address is not None and backend != "ray":
-        raise GcdtError("--address applies only to --backend ray")
+    for option, value in (("--address", address), ("--storage", storage)):
+        if value is not None and backend != "ray":
+            raise GcdtError(f"{option} applies only to --backend ray")
+    if retries < 0:
+        raise GcdtError(f"retries must be >= 0, got {retries}")
     if address is not None:
-        _check_address(address)
+        from gcdt.experiments.cluster import check_address
+
+        check_address(address)
+    if storage is not None:
+        ArtifactStorage(storage).check_writable()
     store = RunStore(store_root or results_dir(profile.name) / "runs")
     store.remove_partial_files()
     # The estimates matter to --dry-run only: defaults, without reading every result file.
     planned, warnings = plan(profile, store, only, CostModel(), methods=methods)
     summary = SweepSummary(profile.name, planned, warnings=warnings)
     summary.skipped = [p.key for p in planned if p.state == "done"]
+    summary.rerun = rerun_command(profile.name, backend, address, storage, retries, only)
     todo = [p for p in planned if p.state != "done"]
     workers = workers or default_workers(profile)
     started = time.perf_counter()
     if todo:
-        run = _run_ray if backend == "ray" else _run_local
-        bar = progress_bar(
-            total=len(todo), desc=f"sweep {profile.name}", unit="run", progress=progress
-        )
+        if backend == "ray":
+            from gcdt.experiments.cluster import RayBackend
+
+            runner: RayBackend | LocalBackend = RayBackend(profile, workers, address, storage)
+        else:
+            runner = LocalBackend(workers)
         try:
-            for key, status in run(todo, str(store.root), workers, address, profile):
-                (summary.done if status == "done" else summary.failed).append(key)
-                bar.update(1)
-                bar.set_postfix(failed=len(summary.failed))
+            _run_all(runner, todo, store, summary, retries, progress)
         finally:
-            bar.close()
+            runner.close()
     summary.seconds = time.perf_counter() - started
     return summary
 
 
-def _run_local(
-    todo: list[PlannedRun], root: str, workers: int, address: str | None, profile: Profile
-):
-    """Yield (key, status) as local worker processes finish runs."""
-    artifacts = str(artifacts_dir())
-    # Spawned, not forked: workers start clean of the driver's torch threads and env state.
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = {
-            pool.submit(execute_run, p.entry.spec.to_dict(), root, artifacts, "local"): p.key
-            for p in todo
-        }
-        for future in as_completed(futures):
-            try:
-                yield futures[future], future.result()
-            except BrokenProcessPool:  # a worker died (killed, out of memory): no result file
-                yield futures[future], "failed"
-
-
-def _check_address(address: str) -> None:
-    """Fail within seconds, with the reason, if a Ray address cannot be reached."""
-    if address in ("auto", "local"):
-        return
-    target = address.removeprefix("ray://")
-    host, _, port = target.rpartition(":")
-    if not host or not port.isdigit():
-        raise GcdtError(f"Ray address {address!r} is not HOST:PORT (e.g. 10.0.0.5:6379)")
+def _run_all(
+    runner: Any,
+    todo: list[PlannedRun],
+    store: RunStore,
+    summary: SweepSummary,
+    retries: int,
+    progress: bool,
+) -> None:
+    """Run `todo` on `runner` (a backend), each failed run again up to `retries` times; write
+    each final result into `store` and record it in `summary`."""
+    bar = progress_bar(
+        total=len(todo), desc=f"sweep {summary.profile}", unit="run", progress=progress
+    )
     try:
-        socket.create_connection((host, int(port)), timeout=RAY_CONNECT_TIMEOUT).close()
-    except OSError as err:
-        raise GcdtError(
-            f"cannot reach the Ray cluster at {address} ({err}): start it with `ray start "
-            "--head` there, or leave out --address for a local Ray instance"
-        ) from None
-
-
-def _run_ray(
-    todo: list[PlannedRun], root: str, workers: int, address: str | None, profile: Profile
-):
-    """Yield (key, status) as Ray tasks finish runs."""
-    artifacts = str(artifacts_dir())
-    try:
-        import ray
-    except ImportError:
-        raise GcdtError("the ray backend needs Ray: pip install 'ray==2.60.0'") from None
-    started_here = not ray.is_initialized()
-    if started_here:
-        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
-        if address is None:
-            kwargs["num_cpus"] = workers * profile.cpus_per_run
-        ray.init(address=address, **kwargs)
-    try:
-        gpus = profile.gpus_per_run if ray.cluster_resources().get("GPU", 0) > 0 else 0
-        task = ray.remote(num_cpus=profile.cpus_per_run, num_gpus=gpus, max_retries=0)(execute_run)
-        refs = {task.remote(p.entry.spec.to_dict(), root, artifacts, "ray"): p.key for p in todo}
-        pending = list(refs)
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
-            try:
-                status = ray.get(ready[0])
-            except ray.exceptions.RayError:  # the worker died: no result file
-                status = "failed"
-            yield refs[ready[0]], status
+        for run in todo:
+            runner.submit(run)
+        tries: Counter[str] = Counter()
+        for run, result in runner.results():
+            if result["status"] != "done" and tries[run.key] < retries:
+                tries[run.key] += 1
+                summary.retried.append(f"{run.key}: {result['error']}")
+                runner.submit(run)
+                continue
+            store.write(run.key, result)
+            if result["status"] == "done":
+                summary.done.append(run.key)
+            else:
+                summary.failed.append(run.key)
+                summary.errors[run.key] = result["error"]
+            bar.update(1)
+            bar.set_postfix(failed=len(summary.failed))
     finally:
-        if started_here:
-            ray.shutdown()
+        bar.close()
+
+
+def rerun_command(
+    profile: str,
+    backend: str,
+    address: str | None,
+    storage: str | None,
+    retries: int,
+    only: str | None,
+) -> str:
+    """The `gcdt sweep` command of these options (it runs again what is not done)."""
+    argv = ["gcdt", "sweep", "--profile", profile]
+    for flag, value, default in (
+        ("--only", only, None),
+        ("--backend", backend, "local"),
+        ("--address", address, None),
+        ("--storage", storage, None),
+        ("--retries", retries, RETRIES),
+    ):
+        if value != default:
+            argv += [flag, str(value)]
+    return shlex.join(argv)
+
+
+class LocalBackend:
+    """Runs in local worker processes: `submit` each run, then iterate `results` as they
+    finish (more may be submitted meanwhile, e.g. retries)."""
+
+    name = "local"
+
+    def __init__(self, workers: int) -> None:
+        self._artifacts = str(artifacts_dir())
+        # Spawned, not forked: workers start clean of the driver's torch threads and env state.
+        context = multiprocessing.get_context("spawn")
+        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+        self._pending: dict[Future, PlannedRun] = {}
+        self._lost: list[PlannedRun] = []  # submitted after the pool broke
+
+    def submit(self, run: PlannedRun) -> None:
+        spec = run.entry.spec.to_dict()
+        try:
+            future = self._pool.submit(run_result, spec, self.name, artifacts_root=self._artifacts)
+        except BrokenProcessPool:
+            self._lost.append(run)
+        else:
+            self._pending[future] = run
+
+    def results(self) -> Iterator[tuple[PlannedRun, dict[str, Any]]]:
+        while self._pending or self._lost:
+            if self._lost:
+                run = self._lost.pop()
+                yield run, self._lost_result(run, "the local worker pool broke")
+                continue
+            finished, _ = wait(self._pending, return_when=FIRST_COMPLETED)
+            for future in finished:
+                run = self._pending.pop(future)
+                try:
+                    result = future.result()
+                except BrokenProcessPool:  # a worker died (killed, out of memory)
+                    result = self._lost_result(run, "a local worker process died")
+                yield run, result
+
+    def _lost_result(self, run: PlannedRun, why: str) -> dict[str, Any]:
+        return lost_result(run.entry.spec.to_dict(), self.name, f"BrokenProcessPool: {why}", why)
+
+    def close(self) -> None:
+        self._pool.shutdown(cancel_futures=True)

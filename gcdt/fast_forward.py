@@ -16,15 +16,13 @@ to the same outputs and gradients. What it saves:
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-if TYPE_CHECKING:
-    from gcdt.models import Block, GoalConditionedDT
+# Models come in as plain modules: `gcdt.models` imports this file, never the reverse.
 
 
 def _cpu_keep_scale(x: torch.Tensor, p: float) -> torch.Tensor:
@@ -119,15 +117,16 @@ class _Rows:
 
 
 def predict_actions(
-    model: GoalConditionedDT,
+    model: nn.Module,
     tokens: torch.Tensor,
     mask: torch.Tensor,
     attn_mask: torch.Tensor,
     steps: slice,
 ) -> torch.Tensor:
-    """What `model.forward` returns, from its embedded `tokens` `[batch, 3K, hidden]` on:
-    the actions `[batch, len(steps), action_dim]` of the state tokens of `steps`, zeros on the
-    padding. `mask` is `[batch, K]`, `attn_mask` `[batch, 1, 3K, 3K]`."""
+    """What `model.forward` returns (`model`: a `gcdt.models.GoalConditionedDT`), from its
+    embedded `tokens` `[batch, 3K, hidden]` on: the actions `[batch, len(steps), action_dim]`
+    of the state tokens of `steps`, zeros on the padding. `mask` is `[batch, K]`, `attn_mask`
+    `[batch, 1, 3K, 3K]`."""
     k = tokens.shape[1] // 3
     real = mask.repeat_interleave(3, dim=1)  # [batch, 3K]
     layout = _Rows(real)
@@ -146,15 +145,16 @@ def predict_actions(
 
 
 def _block(
-    block: Block,
+    block: nn.Module,
     x: torch.Tensor,
     mask: torch.Tensor,
     layout: _Rows,
     queries: tuple[torch.Tensor, _Rows] | None = None,
 ) -> torch.Tensor:
-    """`block(x)`: `x`, rows of tokens `[n, hidden]` placed by `layout`, -> the same rows, or
-    only those of `queries` (grid positions, their layout): queries and MLP for those alone,
-    keys and values still from every token. `mask` is `[batch, 1, tokens, tokens]`."""
+    """`block(x)` (`block`: a `gcdt.models.Block`): `x`, rows of tokens `[n, hidden]` placed by
+    `layout`, -> the same rows, or only those of `queries` (grid positions, their layout):
+    queries and MLP for those alone, keys and values still from every token. `mask` is
+    `[batch, 1, tokens, tokens]`."""
     h = x.shape[1]
     heads, width = block.heads, h // block.heads
     drop, training = block.drop.p, block.training

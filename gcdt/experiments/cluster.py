@@ -17,7 +17,7 @@ from __future__ import annotations
 import logging
 import socket
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from gcdt.errors import GcdtError
 from gcdt.experiments.runner import lost_result, run_result
@@ -25,7 +25,15 @@ from gcdt.paths import artifacts_dir
 
 if TYPE_CHECKING:
     from gcdt.experiments.profiles import Profile
-    from gcdt.experiments.sweep import PlannedRun
+
+
+class PlannedRun(Protocol):
+    """What a backend needs of a sweep's planned run (`gcdt.experiments.sweep.PlannedRun`):
+    its grid entry. The sweep imports this module, never the reverse."""
+
+    @property
+    def entry(self) -> Any: ...
+
 
 RAY_CONNECT_TIMEOUT = 5.0  # seconds to reach a cluster's address before giving up
 

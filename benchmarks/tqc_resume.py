@@ -2,9 +2,10 @@
 
     python benchmarks/tqc_resume.py [--task reach] [--seeds 0 1 2] [--steps 6000]
 
-A resume cannot be bit-identical with panda-gym's end-effector control (PyBullet's IK keeps
-hidden solver state that no checkpoint holds; docs/library.md), so the question is
-statistical. For each seed the same command runs twice: once uninterrupted, once SIGKILLed
+A resume restores the learner exactly, and the envs by replaying their current episodes; on
+Push and PickAndPlace PyBullet carries state over from an env's earlier episodes that the
+replay does not rebuild (docs/library.md), so there the question is statistical (on Reach the
+curves must be equal). For each seed the same command runs twice: once uninterrupted, once SIGKILLed
 at the first checkpoint past `--kill-at` env steps and then continued with `--resume`. Both
 evaluate on the same held-out episodes every `--eval-every` steps. The report puts the gap
 between a seed's two curves beside the two yardsticks it must stay within: the binomial

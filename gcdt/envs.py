@@ -270,8 +270,9 @@ class SeededResets(gym.Wrapper):
 
     def restore_replay_state(self, state: dict[str, Any]) -> None:
         """Bring a fresh env to `replay_state()`'s point: reset with that episode's seed and
-        replay its actions. The reset is exact; the replayed steps can differ slightly, by
-        state PyBullet's inverse kinematics keeps across calls (`gcdt.baselines.tqc_checkpoint`)."""
+        replay its actions. The reset is exact; with an object on the table the replayed steps
+        can differ slightly, by state PyBullet carries over from the env's earlier episodes
+        (`gcdt.baselines.tqc_checkpoint`)."""
         if state["episodes"] == 0:
             return
         self.episodes = state["episodes"] - 1

@@ -139,3 +139,42 @@ def reach_gcdt(reach_expert_data, tmp_path_factory):
 
     cfg = TrainConfig(method="dt", steps=400, context=5, log_every=10, checkpoint_every=10)
     return train(reach_expert_data, cfg, tmp_path_factory.mktemp("reach_gcdt"), progress=False)
+
+
+def _start_ray_cluster(node_envs: tuple[dict[str, str], ...] = (), attempts: int = 3):
+    """A Ray head that runs no tasks (no CPUs, no dashboard) and one 1-CPU worker node per
+    entry of `node_envs`, the extra environment its processes start with; returns the
+    cluster and its worker nodes. Ray gives a starting node 30 s to register, which a loaded
+    2-core machine can miss: the cluster's start is tried again, never the test's sweep."""
+    import os
+
+    from ray.cluster_utils import Cluster
+
+    for attempt in range(attempts):
+        cluster = None
+        saved = dict(os.environ)
+        try:
+            cluster = Cluster(
+                initialize_head=True, head_node_args={"num_cpus": 0, "include_dashboard": False}
+            )
+            nodes = []
+            for env in node_envs:  # a node's processes inherit the environment it starts with
+                os.environ.update(env)
+                nodes.append(cluster.add_node(num_cpus=1))
+            cluster.wait_for_nodes()
+            return cluster, nodes
+        except Exception:
+            if cluster is not None:
+                cluster.shutdown()
+            if attempt == attempts - 1:
+                raise
+        finally:
+            os.environ.clear()
+            os.environ.update(saved)
+    raise AssertionError("unreachable")
+
+
+@pytest.fixture
+def start_ray_cluster():
+    """`_start_ray_cluster`: a head and worker nodes, retried where Ray's start times out."""
+    return _start_ray_cluster

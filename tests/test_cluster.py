@@ -88,14 +88,12 @@ def test_storage_uri_needs_the_ray_backend(assert_usage_error, outputs, tmp_path
     )
 
 
-def test_cluster_without_room_for_one_run_is_refused(assert_usage_error, outputs):
+def test_cluster_without_room_for_one_run_is_refused(
+    assert_usage_error, outputs, start_ray_cluster
+):
     ray = pytest.importorskip("ray")
-    from ray.cluster_utils import Cluster
 
-    # A head of no CPUs and no worker node yet: a smoke run asks for 1 CPU.
-    cluster = Cluster(
-        initialize_head=True, head_node_args={"num_cpus": 0, "include_dashboard": False}
-    )
+    cluster, _ = start_ray_cluster()  # a head of no CPUs, no worker node: a run asks for 1
     try:
         assert_usage_error(
             [*RAY_SMOKE, "--address", cluster.address],

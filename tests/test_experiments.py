@@ -332,25 +332,21 @@ def test_evaluation_never_replays_a_training_instance(local_sweep):
     assert not trained & evaluated
 
 
-def test_multi_node_sweep_survives_a_lost_node(local_sweep, tmp_path, monkeypatch):
+def test_multi_node_sweep_survives_a_lost_node(
+    local_sweep, tmp_path, monkeypatch, start_ray_cluster
+):
     """A head and two worker nodes (separate raylets), no shared filesystem: each node makes
     its artifacts in its own folder, the driver alone writes the store. One worker node is
     lost mid-sweep; its run is retried on the other, and the results equal a local sweep's."""
     ray = pytest.importorskip("ray")
-    from ray.cluster_utils import Cluster
 
     driver_artifacts = tmp_path / "driver-artifacts"  # no run may touch the driver's folder
     # The head runs the driver alone, as on a real cluster: runs go to the worker nodes.
-    cluster = Cluster(
-        initialize_head=True, head_node_args={"num_cpus": 0, "include_dashboard": False}
+    cluster, nodes = start_ray_cluster(
+        tuple({"GCDT_ARTIFACTS": str(tmp_path / f"node{i}")} for i in range(2))
     )
     try:
-        nodes = []
-        for i in range(2):  # a node's processes inherit the environment it starts with
-            monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / f"node{i}"))
-            nodes.append(cluster.add_node(num_cpus=1))
         monkeypatch.setenv("GCDT_ARTIFACTS", str(driver_artifacts))
-        cluster.wait_for_nodes()
         runs, outcome = tmp_path / "runs", {}
         # Every run node 0 starts waits on its first artifact's lock, held here: when node 0
         # is lost, a run is in flight there for certain.

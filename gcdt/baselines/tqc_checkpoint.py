@@ -8,11 +8,12 @@ NumPy / Python / torch RNG states (HER samples with NumPy's), each env's place i
 episode stream, and what the caller adds (the learning curve so far).
 
 An env mid-episode is restored by resetting it with that episode's seed and replaying the
-episode's actions. Its reset state is rebuilt bit for bit (`tests/test_tqc.py`), but the
-steps after it are not: panda-gym's end-effector control goes through PyBullet's inverse
-kinematics, which keeps state across calls that neither a reset nor PyBullet's own
-`saveState`/`restoreState` brings back. So the learner resumes exactly and the envs up to
-that drift (docs/library.md gives its size).
+episode's actions. On Reach that rebuilds the env bit for bit, and a resumed run ends with
+the weights of an uninterrupted one (`tests/test_tqc.py`). With an object on the table (Push,
+PickAndPlace) PyBullet carries state from an env's earlier episodes into the next one, which
+a reset does not clear and a checkpoint does not hold: the replayed steps then differ
+slightly from the original ones (docs/library.md gives the size). So the learner resumes
+exactly, and the envs up to that difference.
 
 The file: a magic line, the length of a JSON header, the header (what the run is, and the
 payload's length and SHA-256), then the pickled payload; written to a temp file, synced and

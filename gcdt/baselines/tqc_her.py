@@ -16,7 +16,7 @@ the task, reward, config and backend they were trained with, and `run.json` reco
 wall-clock time and env steps/s.
 
 A run checkpoints itself every `checkpoint_seconds` (`tqc_checkpoint.py`); `resume=True`
-carries on from the last checkpoint (the learner exactly, the envs up to PyBullet's IK state:
+carries on from the last checkpoint (the learner exactly, the envs up to state PyBullet keeps:
 see that module).
 
 Output folder: `model.zip` (last), `best_model.zip`, `eval.csv`, `run.json`, and while the run
@@ -250,138 +250,194 @@ def train_tqc(
     device and the checkpoint cadence. With `resume`, the run in `out_dir` continues from its
     checkpoint, which must be of the same task, reward, seed, config and evaluation.
     """
-    spec = get_task(task)
-    check_reward(reward)
-    if cfg.task != spec.name:
-        raise GcdtError(f"the TQC+HER config is for task {cfg.task!r}, not {spec.name!r}")
-    run = TQCRunSettings(**settings)
-    seed, eval_episodes, stop_at, device = run.seed, run.eval_episodes, run.stop_at, run.device
-    eval_every = run.eval_every if run.eval_every is not None else max(cfg.steps // 10, 1)
-    out = Path(out_dir)
-    identity = {
-        "task": spec.name,
-        "reward": reward,
-        "seed": seed,
-        "backend": cfg.backend,
-        "config": cfg.to_dict(),
-        "evaluation": {"every": eval_every, "episodes": eval_episodes, "stop_at": stop_at},
-    }
-    ckpt_path = out / CHECKPOINT_FILE
-    if (out / RUN_JSON).exists():
-        raise GcdtError(f"{out} already holds a finished TQC+HER run; choose another --out")
-    if resume:
-        check_identity(ckpt_path, read_header(ckpt_path), identity)  # a one-line error if not
-    else:
-        taken = [name for name in (*RUN_FILES, CHECKPOINT_FILE) if (out / name).exists()]
-        if taken:
-            raise GcdtError(
-                f"{out} already holds a TQC+HER run ({taken[0]}); resume it with --resume, "
-                "or choose another --out"
-            )
-
-    commit = git_commit()  # the code the run starts with, not what the tree holds at its end
-    model = build_tqc(cfg, spec.name, reward, seed, device)  # refuses a bad loop, writes nothing
-    out.mkdir(parents=True, exist_ok=True)
-    # Travels inside every saved zip: what `TQCPolicy` checks a model against.
-    model.gcdt = {
-        "task": spec.name,
-        "reward": reward,
-        "config": cfg.name,
-        "seed": seed,
-        "backend": cfg.backend,
-    }
-    clock = _RunClock()
-    evaluator = _PeriodicEvaluation(
-        model,
-        out,
-        spec.name,
-        reward,
-        eval_every,
-        eval_episodes,
-        seed + EVAL_SEED_OFFSET,
-        clock,
-        stop_at,
-    )
-    resumes = 0
-    if resume:
-        saved = load_checkpoint(ckpt_path, model)
-        model.gcdt = saved["gcdt"]
-        clock.set_state(saved["clock"])
-        evaluator.set_state(saved["evaluation"])
-        resumes = saved["resumes"] + 1
-        commit, command = saved["git_commit"], saved["command"]  # as the run started
-
-    def checkpoint() -> int:
-        extra = {
-            "gcdt": model.gcdt,
-            "evaluation": evaluator.state(),
-            "clock": clock.state(),
-            "resumes": resumes,
-            "git_commit": commit,
-            "command": command,
-        }
-        return save_checkpoint(ckpt_path, model, identity, extra)
-
+    run = _Run.start(task, reward, cfg, Path(out_dir), TQCRunSettings(**settings), command, resume)
+    model, evaluator = run.model, run.evaluator
     if model.num_timesteps < cfg.steps and not (resume and evaluator.reached_target()):
         model.learn(
             cfg.steps - model.num_timesteps,
             callback=[
                 evaluator.callback(cfg.steps, cfg.learning_starts, progress),
-                _checkpoint_callback(checkpoint, run.checkpoint_seconds),
+                _checkpoint_callback(run.checkpoint, run.settings.checkpoint_seconds),
             ],
             reset_num_timesteps=not resume,
         )
     # model.learn stops at the first multiple of n_envs >= steps, or at `stop_at`.
-    learning_rate = evaluator.learning_rate()
-    if evaluator.last_step != model.num_timesteps:
-        evaluator.run()  # the final policy is always measured
-    wall = clock.wall()
-    _save_zip(model, out / MODEL_ZIP)
-    model.get_env().close()
-    train_seconds = wall - evaluator.seconds
-    result = TQCResult(
-        out_dir=out,
-        model=out / MODEL_ZIP,
-        best_model=out / BEST_MODEL_ZIP,
-        env_steps=int(model.num_timesteps),
-        train_seconds=train_seconds,
-        wall_seconds=wall,
-        learning_steps_per_second=learning_rate,
-        best_success_rate=evaluator.best[0] if evaluator.rows else None,
-        final_success_rate=evaluator.rows[-1]["success_rate"] if evaluator.rows else None,
-    )
-    write_json_atomic(
-        out / RUN_JSON,
-        {
+    return run.finish()
+
+
+@dataclass
+class _Run:
+    """One `train_tqc` run: what it was started with (`identity`, checked on resume), its
+    model, clock and evaluator, and how it checkpoints and finishes."""
+
+    task: str
+    reward: str
+    cfg: TQCConfig
+    out: Path
+    settings: TQCRunSettings
+    eval_every: int
+    identity: dict[str, Any]
+    model: Any
+    clock: _RunClock
+    evaluator: _PeriodicEvaluation
+    commit: str | None
+    command: str | None
+    resumes: int = 0
+
+    @classmethod
+    def start(
+        cls,
+        task: str,
+        reward: str,
+        cfg: TQCConfig,
+        out: Path,
+        settings: TQCRunSettings,
+        command: str | None,
+        resume: bool,
+    ) -> _Run:
+        """Check `out` and the config, build the model, and restore the checkpoint on
+        `resume`; nothing is written before every check has passed."""
+        spec = get_task(task)
+        check_reward(reward)
+        if cfg.task != spec.name:
+            raise GcdtError(f"the TQC+HER config is for task {cfg.task!r}, not {spec.name!r}")
+        seed = settings.seed
+        eval_every = (
+            settings.eval_every if settings.eval_every is not None else max(cfg.steps // 10, 1)
+        )
+        identity = {
             "task": spec.name,
             "reward": reward,
             "seed": seed,
+            "backend": cfg.backend,
+            "config": cfg.to_dict(),
+            "evaluation": {
+                "every": eval_every,
+                "episodes": settings.eval_episodes,
+                "stop_at": settings.stop_at,
+            },
+        }
+        _check_out(out, identity, resume)
+        commit = git_commit()  # the code the run starts with, not what the tree holds at its end
+        model = build_tqc(cfg, spec.name, reward, seed, settings.device)  # refuses a bad loop
+        out.mkdir(parents=True, exist_ok=True)
+        # Travels inside every saved zip: what `TQCPolicy` checks a model against.
+        model.gcdt = {
+            "task": spec.name,
+            "reward": reward,
+            "config": cfg.name,
+            "seed": seed,
+            "backend": cfg.backend,
+        }
+        clock = _RunClock()
+        evaluator = _PeriodicEvaluation(
+            model,
+            out,
+            spec.name,
+            reward,
+            eval_every,
+            settings.eval_episodes,
+            seed + EVAL_SEED_OFFSET,
+            clock,
+            settings.stop_at,
+        )
+        run = cls(
+            spec.name, reward, cfg, out, settings, eval_every, identity, model, clock, evaluator,
+            commit, command,
+        )  # fmt: skip
+        if resume:
+            saved = load_checkpoint(out / CHECKPOINT_FILE, model)
+            model.gcdt = saved["gcdt"]
+            clock.set_state(saved["clock"])
+            evaluator.set_state(saved["evaluation"])
+            run.resumes = saved["resumes"] + 1
+            run.commit, run.command = saved["git_commit"], saved["command"]  # as it started
+        return run
+
+    def checkpoint(self) -> int:
+        """Save everything the run needs to carry on (`tqc_checkpoint`); its size in bytes."""
+        extra = {
+            "gcdt": self.model.gcdt,
+            "evaluation": self.evaluator.state(),
+            "clock": self.clock.state(),
+            "resumes": self.resumes,
+            "git_commit": self.commit,
+            "command": self.command,
+        }
+        return save_checkpoint(self.out / CHECKPOINT_FILE, self.model, self.identity, extra)
+
+    def finish(self) -> TQCResult:
+        """Measure the final policy, save it, write `run.json` last, drop the checkpoint."""
+        model, evaluator, out = self.model, self.evaluator, self.out
+        learning_rate = evaluator.learning_rate()
+        if evaluator.last_step != model.num_timesteps:
+            evaluator.run()  # the final policy is always measured
+        wall = self.clock.wall()
+        _save_zip(model, out / MODEL_ZIP)
+        model.get_env().close()
+        result = TQCResult(
+            out_dir=out,
+            model=out / MODEL_ZIP,
+            best_model=out / BEST_MODEL_ZIP,
+            env_steps=int(model.num_timesteps),
+            train_seconds=wall - evaluator.seconds,
+            wall_seconds=wall,
+            learning_steps_per_second=learning_rate,
+            best_success_rate=evaluator.best[0] if evaluator.rows else None,
+            final_success_rate=evaluator.rows[-1]["success_rate"] if evaluator.rows else None,
+        )
+        write_json_atomic(out / RUN_JSON, self._record(result))
+        (out / CHECKPOINT_FILE).unlink(missing_ok=True)  # run.json is the finished run's record
+        return result
+
+    def _record(self, result: TQCResult) -> dict[str, Any]:
+        """`run.json`: the config, the evaluation, the times and where the run came from."""
+        cfg, evaluator, seed = self.cfg, self.evaluator, self.settings.seed
+        learning_rate = result.learning_steps_per_second
+        return {
+            "task": self.task,
+            "reward": self.reward,
+            "seed": seed,
             "config": cfg.to_dict(),
             "overrides": cfg.overrides,
-            "device": _device_name(model, cfg.backend),
-            "eval_every": eval_every,
-            "eval_episodes": eval_episodes,
+            "device": _device_name(self.model, cfg.backend),
+            "eval_every": self.eval_every,
+            "eval_episodes": self.settings.eval_episodes,
             "eval_seed": seed + EVAL_SEED_OFFSET,
-            "stop_at": stop_at,
+            "stop_at": self.settings.stop_at,
             "env_steps": result.env_steps,
-            "train_seconds": round(train_seconds, 2),
+            "train_seconds": round(result.train_seconds, 2),
             "eval_seconds": round(evaluator.seconds, 2),
-            "wall_seconds": round(wall, 2),
+            "wall_seconds": round(result.wall_seconds, 2),
             "env_steps_per_second": round(result.env_steps_per_second, 2),
             "learning_steps_per_second": learning_rate and round(learning_rate, 2),
             # CPU time of every thread over the kept work (a resume's repeated part excluded)
-            "core_hours": round(clock.cpu_seconds() / 3600, 3),
-            "resumes": resumes,
+            "core_hours": round(self.clock.cpu_seconds() / 3600, 3),
+            "resumes": self.resumes,
             "best": evaluator.best_row,
             "final": evaluator.rows[-1] if evaluator.rows else None,
-            "command": command,
+            "command": self.command,
             "created": utc_now(),
-            "git_commit": commit,
+            "git_commit": self.commit,
             "versions": package_versions((*TRACKED_PACKAGES, *TQC_PACKAGES[cfg.backend])),
-        },
-    )
-    ckpt_path.unlink(missing_ok=True)  # the run is finished: run.json is its record
-    return result
+        }
+
+
+def _check_out(out: Path, identity: dict[str, Any], resume: bool) -> None:
+    """Refuse a finished run's folder, a fresh start over an existing run, and a resume from a
+    missing checkpoint or one of another run (one line each)."""
+    ckpt_path = out / CHECKPOINT_FILE
+    if (out / RUN_JSON).exists():
+        raise GcdtError(f"{out} already holds a finished TQC+HER run; choose another --out")
+    if resume:
+        check_identity(ckpt_path, read_header(ckpt_path), identity)  # a one-line error if not
+        return
+    taken = [name for name in (*RUN_FILES, CHECKPOINT_FILE) if (out / name).exists()]
+    if taken:
+        raise GcdtError(
+            f"{out} already holds a TQC+HER run ({taken[0]}); resume it with --resume, "
+            "or choose another --out"
+        )
 
 
 class _RunClock:

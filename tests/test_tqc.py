@@ -438,7 +438,7 @@ def checkpointed(tmp_path_factory):
     return out
 
 
-def _weights(zip_path) -> list[np.ndarray]:
+def _all_weights(zip_path) -> list[np.ndarray]:
     """Every array of an SBX TQC zip's actor and critics (their targets included)."""
     import jax
     from sbx import TQC
@@ -464,7 +464,8 @@ def test_a_killed_run_resumes_and_finishes_as_one_run(checkpointed, tmp_path):
     assert 1000 < read_header(out / CHECKPOINT_FILE)["env_steps"] < 1600
     assert main(_reach_argv(out, "--resume")) == 0
     assert main(_reach_argv(tmp_path / "uninterrupted")) == 0
-    resumed, whole = _weights(out / "model.zip"), _weights(tmp_path / "uninterrupted/model.zip")
+    resumed = _all_weights(out / "model.zip")
+    whole = _all_weights(tmp_path / "uninterrupted/model.zip")
     assert len(resumed) == len(whole) > 0
     for ours, theirs in zip(resumed, whole, strict=True):
         np.testing.assert_array_equal(ours, theirs)

@@ -436,7 +436,7 @@ def test_failing_run_is_recorded_and_the_others_complete(local_sweep, tmp_path, 
     assert not summary.ok and len(summary.failed) == 1 and len(summary.done) == 12
     failed = json.loads((tmp_path / f"{summary.failed[0]}.json").read_text())
     assert failed["status"] == "failed" and failed["spec"]["method"] == "tqc"
-    assert "eval_every must be an integer >= 1, got 0" in failed["error"]
+    assert "eval_every must be a positive integer, got 0" in failed["error"]
     assert "Traceback" in failed["traceback"]
     # Tried RETRIES more times in the sweep, then listed with the command that re-runs it.
     assert summary.retried == [f"{summary.failed[0]}: {failed['error']}"] * 2

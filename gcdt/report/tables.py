@@ -17,6 +17,7 @@ import pandas as pd
 from scipy import stats
 
 from gcdt.baselines.publish import AGENTS_DIR
+from gcdt.baselines.tqc_her import EVAL_CSV, RUN_JSON
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
 from gcdt.experiments.profiles import Profile
@@ -95,9 +96,9 @@ def load_agent_curves(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:
     (task, reward, seed, env_steps, success_rate, mean_return, episodes, agent), read from
     each agent's `run.json` (what it is) and `eval.csv` (its held-out curve)."""
     frames = []
-    for run in sorted(Path(agents_dir).glob("tqc_*/run.json")):
+    for run in sorted(Path(agents_dir).glob(f"tqc_*/{RUN_JSON}")):
         record = json.loads(run.read_text())
-        curve = pd.read_csv(run.parent / "eval.csv")
+        curve = pd.read_csv(run.parent / EVAL_CSV)
         frames.append(
             curve.assign(
                 task=record["task"],

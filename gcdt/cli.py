@@ -668,7 +668,7 @@ class Sweep(_Command, _Progress):
         from gcdt.experiments import plan, results_dir
         from gcdt.experiments.costs import CostModel
         from gcdt.experiments.store import RunStore
-        from gcdt.experiments.sweep import default_workers, shared_cost
+        from gcdt.experiments.sweep import default_workers, section_costs, shared_cost
 
         costs = CostModel.measured()  # reads the bench JSON and every result file: once
         store = RunStore(results_dir(profile.name) / "runs")
@@ -682,7 +682,14 @@ class Sweep(_Command, _Progress):
             )
         todo = [p for p in planned if p.state != "done"]
         workers = self.workers or default_workers(profile)
-        total = sum(p.estimate_seconds for p in todo) + shared_cost(todo, costs)
+        shared = shared_cost(todo, costs)
+        for section, (runs, seconds) in section_costs(todo).items():
+            print(f"section {section}: {runs} runs to run, about {seconds / 3600:.1f} h of work")
+        print(f"datasets and TQC+HER experts to make: about {shared / 3600:.1f} h of work")
+        if waiting := [p for p in todo if p.state == "waiting"]:
+            agents = sorted({p.problem for p in waiting})
+            print(f"{len(waiting)} of them wait for published agents: {'; '.join(agents)}")
+        total = sum(p.estimate_seconds for p in todo) + shared
         print(
             f"{len(planned)} runs, {len(todo)} to run: about {total / 3600:.1f} h of work, "
             f"{total / 3600 / workers:.1f} h on {workers} worker(s) (estimate)"

@@ -1,11 +1,15 @@
 #!/usr/bin/env bash
 # Issue 42's long TQC+HER runs (1M env steps, cpu config, sbx loop, seed 0), one after the
 # other, each started or resumed from its checkpoint: re-run this script after any stop.
-# Usage: nohup scripts/long_tqc_runs.sh > artifacts/long_tqc_runs.log 2>&1 &
+# Usage: nohup scripts/long_tqc_runs.sh [task:reward ...] >> artifacts/long_tqc_runs.log 2>&1 &
+# With no arguments it walks every run; two instances given disjoint lists use both cores
+# (two instances must never share a run: they would write the same checkpoint).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT="${GCDT_ARTIFACTS:-artifacts}/long_tqc"
-for run in pick_and_place:sparse push:sparse reach:sparse push:dense pick_and_place:dense; do
+runs=("$@")
+[ ${#runs[@]} -gt 0 ] || runs=(pick_and_place:sparse push:sparse reach:sparse push:dense pick_and_place:dense)
+for run in "${runs[@]}"; do
   task="${run%%:*}" reward="${run##*:}" out="$ROOT/${task}_${reward}"
   [ -f "$out/run.json" ] && continue  # finished
   resume=()

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 
@@ -525,9 +526,12 @@ def test_dry_run_lists_runs_with_state_and_cost(capsys):
     lines = capsys.readouterr().out.strip().splitlines()
     p = get_profile("standard")
     n = len(p.rq4_sizes) * len(p.seeds) * len(p.rq4.tasks)
-    assert len(lines) == n + 1 and lines[-1].startswith(f"{n} runs, ")
-    assert all("/sparse seed " in line and " min " in line for line in lines[:-1])
+    runs = [line for line in lines if "[rq4" in line]
+    assert len(runs) == n and lines[-1].startswith(f"{n} runs, ")
+    assert all("/sparse seed " in line and " min " in line for line in runs)
     assert sum("gcdt push/sparse seed 2" in line for line in lines) == len(p.rq4_sizes)
+    # Each section's cost, then the data's (done runs cost nothing: the published ones are).
+    assert lines[-2].startswith("datasets and TQC+HER experts to make: about ")
     costs = CostModel()
     short, long = (
         dataclasses.replace(build_grid(TINY, only="table1")[0].spec, train_steps=n)
@@ -621,3 +625,86 @@ def test_the_paper_profiles_path_runs_end_to_end_in_miniature(tmp_path, monkeypa
     assert tqc_run["spec"]["tqc"]["steps"] == 150
     for r in results.values():
         assert r["evaluations"][0]["episodes"] >= 1
+
+
+def test_large_profile_keeps_the_papers_data_and_evaluation():
+    large = get_profile("large")
+    text = deviations_text(large)
+    assert "transitions of expert" not in text and "env steps instead of" not in text
+    assert "expert data from the" not in text  # TQC+HER agents, as in the paper
+    assert "Table 1's TQC+HER cells from the published agents of 1,000,000 online steps" in text
+    assert "checked against one 4 times longer on push, pick_and_place (sparse)" in text
+    assert "RQ5 (Fig. 4) on push, pick_and_place × sparse only" in text
+    assert "RQ5 expert ratios" not in text  # the paper's shares, in priority order
+    assert "RQ4 subset sizes 100,000, 250,000, 500,000, 1,000,000 instead of" in text
+    grid = build_grid(large)
+    assert not [e for e in grid if e.spec.method == "tqc"]  # the published agents instead
+    # The sweep's order is the priority: Table 1, the budget check, then RQ5 from 25 %.
+    first = [e.sections[0] for e in grid]
+    assert first == sorted(first, key=large.section_order.index)
+    budget = [e.spec for e in grid if e.sections == ("budget",)]
+    assert [(s.task, s.seed, s.train_steps) for s in budget] == [
+        ("push", 0, 40_000),
+        ("pick_and_place", 0, 40_000),
+    ]
+    rq5 = [e.spec.data.expert_ratio for e in grid if e.sections == ("rq5",)]
+    assert rq5[:2] == [0.25, 0.25] and set(rq5) == {0.0, 0.25, 0.5, 0.75}
+    with pytest.raises(GcdtError, match="section_order must order every section once"):
+        dataclasses.replace(large, section_order=("table1",))
+    with pytest.raises(GcdtError, match="the budget check needs fixed train_steps"):
+        dataclasses.replace(large, train_steps=None)
+
+
+def _publish_fake_agent(folder: Path, steps: int, success: float) -> None:
+    """A published agent's files as `gcdt.baselines.publish` writes them (the zip's bytes are
+    only hashed here)."""
+    folder.mkdir(parents=True)
+    (folder / "model.zip").write_bytes(f"agent of {steps} steps".encode())
+    held_out = {"seed": 5000, "success_rate": success, "mean_return": -5.0, "std_return": 2.0,
+                "episodes": 500, "timesteps": 9000}  # fmt: skip
+    curve = [{"env_steps": float(steps), "success_rate": success, "mean_return": -5.0}]
+    record = {"task": "reach", "reward": "sparse", "seed": 0, "env_steps": steps,
+              "curve": curve, "published": {"held_out": held_out}}  # fmt: skip
+    (folder / "run.json").write_text(json.dumps(record))
+
+
+def test_runs_wait_for_their_published_agent(tmp_path, monkeypatch):
+    """Data from an agent not published yet, or not of the profile's steps, is never made from
+    a stand-in: its runs wait, and run once the agent is there."""
+    from gcdt.experiments import plan
+    from gcdt.report.tables import agent_rows, table1
+
+    monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))
+    agent = tmp_path / "experts" / "tqc_reach_sparse"
+    profile = dataclasses.replace(
+        TINY,
+        expert_agents={"reach": str(agent / "model.zip")},
+        agent_steps=120,
+        tqc_agents=True,
+        table1_tqc=Scope(tasks=()),
+        rq4=Scope(tasks=()),
+        rq5=Scope(tasks=()),
+        ablation=Scope(tasks=()),
+        targets=Scope(tasks=()),
+        generalisation=Scope(tasks=()),
+    )
+    summary = sweep(profile, store_root=tmp_path / "runs", workers=1, progress=False)
+    assert summary.ok and not summary.done and len(summary.waiting) == 2  # GC-DT and BC
+    assert "2 waiting" in summary.line()
+    assert summary.lines()[1] == f"waiting: 2 runs for {agent / 'model.zip'} (not published, " \
+        "or not of agent_steps)"  # fmt: skip
+    assert not (tmp_path / "runs").exists() or not list((tmp_path / "runs").glob("*.json"))
+    _publish_fake_agent(agent, steps=100, success=0.5)  # another budget's agent: still waits
+    store = RunStore(tmp_path / "runs")
+    assert {p.state for p in plan(profile, store)[0]} == {"waiting"}
+    assert agent_rows(profile, tmp_path / "experts") == []  # nor is it Table 1's TQC+HER
+    (agent / "run.json").unlink(), (agent / "model.zip").unlink(), agent.rmdir()
+    _publish_fake_agent(agent, steps=120, success=0.9)
+    planned = plan(profile, store)[0]
+    assert {p.state for p in planned} == {"missing"}
+    assert {p.entry.spec.data.expert_digest for p in planned} != {"pending"}
+    (row,) = agent_rows(profile, tmp_path / "experts")
+    cell = table1(pd.DataFrame([row])).iloc[0]
+    assert (cell["method"], cell["success_mean"], cell["seeds"]) == ("tqc", 90.0, 1)
+    assert cell["success_ci_low"] < 90.0 < cell["success_ci_high"]  # 500 held-out episodes
+    assert (cell["paper_success"], cell["paper_return"]) == (100.0, -1.82)

@@ -154,6 +154,34 @@ def test_directions_set_each_claim_of_the_paper_beside_ours(runs):
     )
 
 
+def test_directions_across_profiles_set_each_profiles_answer_side_by_side(runs, monkeypatch):
+    """A comparison one profile makes and another does not shows '--'; a profile with no
+    published runs gets no column; disagreements are bold and counted."""
+    table1_only = runs[runs["sections"].apply(lambda s: "table1" in s)]
+    table1_only = table1_only.assign(sections=[("table1",)] * len(table1_only))
+    by_name = {"small": table1_only, "big": runs}
+
+    def load(profile, runs_dir=None):
+        if profile.name not in by_name:
+            raise GcdtError("no finished runs")
+        return by_name[profile.name]
+
+    monkeypatch.setattr(tables, "load_runs", load)
+    names = [dataclasses.replace(PROFILE, name=n) for n in ("small", "big", "unrun")]
+    table = tables.directions_across(names).set_index("comparison")
+    assert list(table.columns) == ["paper", "small", "big"]
+    assert table.loc["GC-DT vs BC, Push sparse", "small"] == ("higher (+20.0 pts)", False)
+    rq4 = "RQ4, Push sparse: less success on the smallest subset than on all data"
+    assert pd.isna(table.loc[rq4, "small"]) and table.loc[rq4, "big"][1]
+    text = tables.directions_across_markdown(names)
+    row = "| GC-DT vs BC, Push sparse | equal (+0.4 pts) | **higher (+20.0 pts)** | **higher"
+    assert row in text
+    assert f"| {rq4} | yes | -- | yes (smallest" in text
+    agree_small = sum(a for _, a in table["small"].dropna())
+    last = f"| **same direction as the paper** | | {agree_small} of"
+    assert text.splitlines()[-1].startswith(last)
+
+
 def test_directions_check_the_papers_floor_at_a_quarter_of_expert_data(tmp_path):
     profile = dataclasses.replace(PROFILE, rq5_ratios=(0.0, 0.25, 1.0))
     store = RunStore(tmp_path)

@@ -136,6 +136,11 @@ def collecting_policy(spec: DataSpec) -> tuple[Policy, str]:
         return make_policy(f"tqc:{tqc_agent(spec.expert_tqc)}", spec.task), spec.expert_tqc.reward
     if spec.expert.startswith(TQC_PREFIX):  # a published agent, checked to be the planned one
         path = REPO_ROOT / spec.expert.removeprefix(TQC_PREFIX)
+        if spec.waits_for:
+            raise GcdtError(
+                f"{path} is not published yet (or not of the profile's agent_steps): publish "
+                "the finished run with `gcdt tqc publish` first"
+            )
         if file_digest(path) != spec.expert_digest:
             raise GcdtError(f"{path} changed since this grid was planned; plan it again")
         policy = make_policy(f"{TQC_PREFIX}{path}", spec.task)

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 from gcdt import paper
 from gcdt.baselines.tqc_her import TQCConfig, load_tqc_config
 from gcdt.errors import GcdtError
-from gcdt.experiments.profiles import EVAL_SEED_STEP, Profile, target_seeds
+from gcdt.experiments.profiles import EVAL_SEED_STEP, SECTION_ORDER, Profile, target_seeds
 from gcdt.methods import OFFLINE_METHODS
 from gcdt.paths import REPO_ROOT
 
@@ -35,7 +35,10 @@ if TYPE_CHECKING:
 #: on 8 envs (tqc_her.yaml's loop values); episode seeds come from one stream per purpose;
 #: BC's budget follows `Profile.bc_budget`. 5: faster scripted experts (shorter episodes).
 RUN_SCHEMA = 5
-SECTIONS = ("table1", "rq4", "rq5", "ablation", "targets", "generalisation")
+SECTIONS = SECTION_ORDER
+#: A published agent's digest while the agent a profile names is not published yet (or is not
+#: of the profile's `agent_steps`): the data it would collect, and every run on it, wait.
+PENDING = "pending"
 #: The goal-generalisation study's methods: both learn from the same region's expert data.
 GENERALISATION_METHODS = ("gcdt", "bc")
 #: The RunSpec fields of evaluation: runs that differ only in them share what they train.
@@ -129,6 +132,13 @@ class DataSpec:
             and ((self.expert == "random") == (self.expert_ratio == 0.0))
         )
 
+    @property
+    def waits_for(self) -> str | None:
+        """The published agent this data waits for, or None when it can be made."""
+        if self.expert_digest == PENDING:
+            return self.expert.removeprefix("tqc:")
+        return None
+
     def base(self, kind: str) -> DataSpec:
         """The `"expert"` or `"random"` collection that this data is drawn from."""
         if kind == "random":
@@ -221,6 +231,11 @@ class RunSpec:
         )
 
     @property
+    def waits_for(self) -> str | None:
+        """The published agent the run's data waits for, or None when it can run."""
+        return None if self.data is None else self.data.waits_for
+
+    @property
     def label(self) -> str:
         """A readable one-line name for listings and progress output."""
         how = f" at target {self.target_return:g}" if self.target_return else ""
@@ -292,7 +307,9 @@ def data_spec(
     expert, noise, digest = profile.expert, float(profile.expert_noise), None
     if task in profile.expert_agents:  # a published agent collects this task's expert data
         expert, noise = f"tqc:{profile.expert_agents[task]}", 0.0
-        digest = file_digest(REPO_ROOT / profile.expert_agents[task])
+        path = REPO_ROOT / profile.expert_agents[task]
+        ready = agent_steps(path.parent) == profile.agent_steps or profile.agent_steps is None
+        digest = file_digest(path) if path.is_file() and ready else PENDING
     expert_tqc = expert_tqc_spec(profile, task) if expert == "tqc" else None
     return DataSpec(
         task=task,
@@ -308,6 +325,14 @@ def data_spec(
         expert_digest=digest,
         goal_region=goal_region,
     )
+
+
+def agent_steps(agent: Path) -> int | None:
+    """The online steps the published agent in folder `agent` trained for (None: none there)."""
+    from gcdt.baselines.tqc_her import RUN_JSON
+
+    record = agent / RUN_JSON
+    return json.loads(record.read_text())["env_steps"] if record.is_file() else None
 
 
 def file_digest(path: Path) -> str:
@@ -343,9 +368,10 @@ def run_spec(
     target_return: float = paper.TARGET_RETURN,
     eval_seeds: tuple[int, ...] | None = None,
     eval_region: str | None = None,
+    budget_factor: int = 1,
 ) -> RunSpec:
     """A run of `profile`, evaluated on its training seed's evaluation seeds unless
-    `eval_seeds` says otherwise."""
+    `eval_seeds` says otherwise, trained for `budget_factor` times the profile's budget."""
     tqc = None
     if method == "tqc":
         steps = profile.tqc_steps if profile.tqc_steps is not None else profile.dataset_size
@@ -364,6 +390,8 @@ def run_spec(
         train_steps = bc_steps(profile, task, data)
     elif method != "tqc" and profile.train_steps is not None:
         train_steps = profile.train_steps[task]
+    if train_steps is not None:
+        train_steps *= budget_factor
     learning_rate = None if method == "tqc" else profile.learning_rate
     if eval_seeds is None:
         eval_seeds = tuple(seed + EVAL_SEED_STEP * i for i in range(profile.eval_seeds))
@@ -397,7 +425,7 @@ def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
         entries.setdefault(spec.key(), (spec, []))[1].append(section)
 
     p = profile
-    for section in SECTIONS if only is None else (only,):
+    for section in p.section_order if only is None else (only,):
         scope = getattr(p, section)
         for task in scope.tasks:
             full = data_spec(p, task, p.dataset_size, 1.0)
@@ -412,6 +440,12 @@ def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
                                 continue
                             data = None if method == "tqc" else full
                             add(section, run_spec(p, method, task, reward, seed, data))
+                    elif section == "budget":
+                        if seed == p.seeds[0]:  # one seed: the check, not a cell
+                            spec = run_spec(
+                                p, "gcdt", task, reward, seed, full, budget_factor=p.budget_factor
+                            )
+                            add(section, spec)
                     elif section == "ablation":
                         for method in ABLATION_METHODS:
                             add(section, run_spec(p, method, task, reward, seed, full))
@@ -440,4 +474,13 @@ def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
                         for ratio in p.rq5_ratios:
                             data = data_spec(p, task, p.dataset_size, ratio)
                             add(section, run_spec(p, "gcdt", task, reward, seed, data))
-    return [GridEntry(spec, tuple(sections)) for spec, sections in entries.values()]
+    # In the sweep's order (the profile's priority): by first section, RQ5 by expert share.
+    rank = {section: i for i, section in enumerate(p.section_order)}
+
+    def priority(item: tuple[RunSpec, list[str]]) -> tuple[int, int]:
+        spec, sections = item
+        share = p.rq5_ratios.index(spec.data.expert_ratio) if sections[0] == "rq5" else 0
+        return rank[sections[0]], share
+
+    ordered = sorted(entries.values(), key=priority)  # stable: the loops' order within
+    return [GridEntry(spec, tuple(sections)) for spec, sections in ordered]

@@ -48,7 +48,7 @@ RETRIES = 2
 class PlannedRun:
     entry: GridEntry
     key: str
-    state: str  # done / failed / missing / corrupt (before this sweep)
+    state: str  # done / failed / missing / corrupt / waiting (before this sweep)
     problem: str | None
     estimate_seconds: float
 
@@ -60,6 +60,7 @@ class SweepSummary:
     done: list[str] = field(default_factory=list)  # run by this sweep, succeeded
     failed: list[str] = field(default_factory=list)  # run by this sweep, failed
     skipped: list[str] = field(default_factory=list)  # already done before
+    waiting: list[str] = field(default_factory=list)  # not run: their published agent is not
     warnings: list[str] = field(default_factory=list)  # corrupt or foreign result files
     retried: list[str] = field(default_factory=list)  # "KEY: error" of each failed try retried
     errors: dict[str, str] = field(default_factory=dict)  # failed run -> its error line
@@ -72,19 +73,26 @@ class SweepSummary:
 
     def line(self) -> str:
         retried = f", {len(self.retried)} retried" if self.retried else ""
+        waiting = f", {len(self.waiting)} waiting" if self.waiting else ""
         return (
             f"sweep {self.profile}: {len(self.done)} done, {len(self.skipped)} skipped, "
-            f"{len(self.failed)} failed{retried} ({self.seconds:.0f} s)"
+            f"{len(self.failed)} failed{retried}{waiting} ({self.seconds:.0f} s)"
         )
+
+    def waiting_lines(self) -> list[str]:
+        """One line per published agent that runs wait for, with how many."""
+        agents = Counter(p.problem for p in self.planned if p.key in self.waiting)
+        return [f"waiting: {n} runs for {agent}" for agent, n in agents.items()]
 
     def lines(self) -> list[str]:
         """`line()`, then each failed run with its error and the command that re-runs them."""
         if not self.failed:
-            return [self.line()]
+            return [self.line(), *self.waiting_lines()]
         labels = {p.key: p.entry.spec.label for p in self.planned}
         failed = [f"failed: {k} {labels.get(k, '')}: {self.errors.get(k, '')}" for k in self.failed]
         return [
             self.line(),
+            *self.waiting_lines(),
             *failed,
             f"re-run the failed runs (tracebacks in their result files): {self.rerun}",
         ]
@@ -109,11 +117,14 @@ def plan(
         stored = store.read(key)
         if stored.problem:
             warnings.append(f"{stored.problem}: it will be run again")
+        state, problem = stored.state, stored.problem
+        if (agent := entry.spec.waits_for) and state != "done":
+            state, problem = "waiting", f"{agent} (not published, or not of agent_steps)"
         # Runs that share a checkpoint (the return-target study's) pay for training once.
         train = entry.spec.method == "tqc" or entry.spec.training_key() not in trained
         trained.add(entry.spec.training_key())
         estimate = costs.estimate(entry.spec, train=train)
-        planned.append(PlannedRun(entry, key, stored.state, stored.problem, estimate))
+        planned.append(PlannedRun(entry, key, state, problem, estimate))
     if only is None and methods is None:
         keys = {p.key for p in planned}
         warnings += [
@@ -151,6 +162,16 @@ def shared_cost(todo: list[PlannedRun], costs: CostModel | None = None) -> float
             steps = spec.tqc_config().steps
             seconds += steps * costs.rates.get(f"tqc_step:{spec.config}", 1.0)
     return seconds
+
+
+def section_costs(todo: list[PlannedRun]) -> dict[str, tuple[int, float]]:
+    """Runs and estimated seconds of `todo` per section, each run counted in the first of its
+    sections in the sweep's order (Table 1's GC-DT is also RQ4's and RQ5's full-data point)."""
+    out: dict[str, tuple[int, float]] = {}
+    for p in todo:
+        runs, seconds = out.get(p.entry.sections[0], (0, 0.0))
+        out[p.entry.sections[0]] = (runs + 1, seconds + p.estimate_seconds)
+    return out
 
 
 def default_workers(profile: Profile) -> int:
@@ -194,8 +215,9 @@ def sweep(
     planned, warnings = plan(profile, store, only, CostModel(), methods=methods)
     summary = SweepSummary(profile.name, planned, warnings=warnings)
     summary.skipped = [p.key for p in planned if p.state == "done"]
+    summary.waiting = [p.key for p in planned if p.state == "waiting"]
     summary.rerun = rerun_command(profile.name, backend, address, storage, retries, only)
-    todo = [p for p in planned if p.state != "done"]
+    todo = [p for p in planned if p.state not in ("done", "waiting")]
     workers = workers or default_workers(profile)
     started = time.perf_counter()
     if todo:

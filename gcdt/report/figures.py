@@ -248,7 +248,8 @@ def online_offline_figure(
         & (runs["expert_ratio"] == 1.0)
         & runs["sections"].apply(lambda s: "table1" in s or "rq4" in s)
     ]
-    online = runs[runs["method"] == "tqc"]
+    # The grid's TQC+HER runs; a profile's published-agent cells are among `agents` already.
+    online = runs[(runs["method"] == "tqc") & ~runs["key"].str.startswith("agent:")]
     tasks = [t for t in TASK_NAMES if t in set(offline["task"]) | set(agents["task"])]
     if not tasks:
         return None

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from gcdt.baselines.publish import AGENTS_DIR
+from gcdt.baselines.publish import AGENTS_DIR, agent_dir
 from gcdt.baselines.tqc_her import EVAL_CSV, RUN_JSON
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
@@ -81,6 +81,8 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
                 "execution": result.get("execution", {}),  # when, where, how long
             }
         )
+    if profile.tqc_agents:
+        rows += agent_rows(profile)
     if not rows:
         others = len(list(store.root.glob("*.json"))) if store.root.is_dir() else 0
         earlier = f" (its {others} result files are of an earlier grid)" if others else ""
@@ -89,6 +91,45 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
             f"`gcdt sweep --profile {profile.name}` (or `make reproduce PROFILE={profile.name}`)"
         )
     return pd.DataFrame(rows)
+
+
+def agent_rows(profile: Profile, agents_dir: str | Path = AGENTS_DIR) -> list[dict]:
+    """Table 1's TQC+HER cells of a profile with `tqc_agents`: each published agent of its
+    Table 1 tasks and rewards, of the profile's `agent_steps`, as a run row whose metrics are
+    the agent's held-out evaluation (`gcdt.baselines.publish`). Agents not published yet, or of
+    another number of steps, are left out: the table shows their cells empty."""
+    rows = []
+    for task in profile.table1.tasks:
+        for reward in profile.table1.rewards:
+            path = agent_dir(task, reward, agents_dir) / RUN_JSON
+            record = json.loads(path.read_text()) if path.is_file() else {}
+            steps = profile.agent_steps
+            if "published" not in record or (steps is not None and record["env_steps"] != steps):
+                continue
+            held_out = record["published"]["held_out"]
+            rows.append(
+                {
+                    "key": f"agent:{path.parent.name}",
+                    "sections": ("table1",),
+                    "method": "tqc",
+                    "task": task,
+                    "reward": reward,
+                    "seed": record["seed"],
+                    "size": None,
+                    "expert_ratio": None,
+                    "target_return": 0.0,
+                    "eval_region": None,
+                    "train_region": None,
+                    "success_rate": held_out["success_rate"],
+                    "mean_return": held_out["mean_return"],
+                    "episodes": held_out["episodes"],
+                    "std_return": held_out["std_return"],
+                    "evaluations": [held_out],
+                    "training": {"curve": record["curve"], "env_steps": record["env_steps"]},
+                    "execution": {"agent": path.parent.name},
+                }
+            )
+    return rows
 
 
 def load_agent_curves(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:
@@ -455,4 +496,41 @@ def directions_markdown(runs: pd.DataFrame) -> str:
         f"| {r.comparison} | {r.paper} | {r.ours} | {'yes' if r.agrees else '**no**'} |"
         for r in table.itertuples()
     ]
+    return "\n".join(lines)
+
+
+def directions_across(profiles: list[Profile]) -> pd.DataFrame:
+    """`directions` of every profile in `profiles` with published runs, side by side: one row
+    per comparison, the paper's answer, then per profile ours, or None where that profile
+    does not make the comparison. So a reader sees which disagreements go away at scale."""
+    tables = {}
+    for profile in profiles:
+        try:
+            tables[profile.name] = directions(load_runs(profile)).set_index("comparison")
+        except GcdtError:
+            continue  # nothing published for this profile yet
+    rows: dict[str, dict] = {}
+    for name, table in tables.items():
+        for comparison, row in table.iterrows():
+            cell = rows.setdefault(comparison, {"comparison": comparison, "paper": row["paper"]})
+            cell[name] = (row["ours"], bool(row["agrees"]))
+    return pd.DataFrame(list(rows.values()), columns=["comparison", "paper", *tables])
+
+
+def directions_across_markdown(profiles: list[Profile]) -> str:
+    """`directions_across` as Markdown, a disagreement in bold, and each profile's count."""
+    table = directions_across(profiles)
+    names = list(table.columns[2:])
+    lines = [
+        "| comparison | paper | " + " | ".join(f"`{n}`" for n in names) + " |",
+        "|---|---|" + "---|" * len(names),
+    ]
+    for row in table.itertuples(index=False):
+        cells = [
+            "--" if not isinstance(c, tuple) else c[0] if c[1] else f"**{c[0]}**" for c in row[2:]
+        ]
+        lines.append(f"| {row.comparison} | {row.paper} | " + " | ".join(cells) + " |")
+    made = [[c for c in table[n] if isinstance(c, tuple)] for n in names]
+    counts = [f"{sum(a for _, a in cells)} of {len(cells)}" for cells in made]
+    lines.append("| **same direction as the paper** | | " + " | ".join(counts) + " |")
     return "\n".join(lines)

@@ -730,10 +730,11 @@ class Report(_Command):
 
         measured_at = dt.datetime.now(dt.UTC)  # when make measured --wall-seconds, near enough
         profile = get_profile(self.profile)
-        written = write_report(profile)
-        if self.wall_seconds is not None:
+        written: list[Path] = []
+        if self.wall_seconds is not None:  # first: report.md prints the record
             wall, backend = self.wall_seconds, self.backend
             written.append(record_reproduction(profile, wall, backend, measured_at=measured_at))
+        written += write_report(profile)
         for path in written:
             print(path.relative_to(REPO_ROOT) if path.is_relative_to(REPO_ROOT) else path)
         if self.readme:

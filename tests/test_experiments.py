@@ -6,6 +6,7 @@ import dataclasses
 import fcntl
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -88,6 +89,12 @@ def test_paper_profile_is_the_paper_and_others_list_their_deviations():
     assert "actions with Gaussian noise of std 0.2" in quick
     with pytest.raises(GcdtError, match="unknown profile 'huge'"):
         get_profile("huge")
+
+
+def test_profile_descriptions_state_no_measured_time():
+    # What a profile took drifts: reproduce.json and `gcdt sweep --dry-run` say it instead.
+    for profile in PROFILES.values():
+        assert not re.search(r"\d\s*(h|min|minutes|hours)\b", profile.description), profile.name
 
 
 def test_expert_noise_reaches_the_scripted_collections_only():

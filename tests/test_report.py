@@ -199,7 +199,10 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path))
     store = _write_runs(tmp_path / "results" / PROFILE.name / "runs")
     monkeypatch.setitem(PROFILES, PROFILE.name, PROFILE)
-    assert "No wall time recorded" in report.readme_block(PROFILE)
+    unrecorded = "No wall time recorded: these results were not made by `make reproduce` "
+    assert unrecorded + "(`gcdt sweep --profile report-test --dry-run` estimates" in (
+        report.readme_block(PROFILE)
+    )
     # Two runs made by an earlier, interrupted `make reproduce`; the others by this one.
     grid = build_grid(PROFILE)
     for i, entry in enumerate(grid):
@@ -209,13 +212,17 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
         _write_result(store, entry.spec, result["metrics"], execution=execution)
     with pytest.raises(GcdtError, match="wall time must be >= 0"):
         report.record_reproduction(PROFILE, -1, "local")
-    path = report.record_reproduction(PROFILE, 5430.04, "local")
-    record = json.loads(path.read_text())
+    # `make reproduce`'s last step: the record, then the report that prints it.
+    assert main(["report", "--profile", PROFILE.name, "--wall-seconds", "5430.04"]) == 0
+    record = json.loads((tmp_path / "results" / PROFILE.name / "reproduce.json").read_text())
     assert record["command"] == "make reproduce PROFILE=report-test BACKEND=local"
     assert record["wall_seconds"] == 5430.0 and record["runs"] == len(grid)
     assert record["earlier_runs"] == 2 and record["earlier_run_seconds"] == 7200.0
     assert record["run_seconds"] == 7200.0 + 60 * (len(grid) - 2)
-    report.write_report(PROFILE)
+    # report.md prints the profile's description with the measured cost beside it.
+    written = (tmp_path / "results" / PROFILE.name / "report.md").read_text()
+    assert f"finished runs). {report.wall_time_text(PROFILE)}\n\nThe `report-test`" in written
+    assert "it took **90 min** for the rest" in written
     block = report.readme_block(PROFILE)
     assert "**90 min**" in block and "| GC-DT vs BC, Push sparse |" in block
     assert (

@@ -62,6 +62,8 @@ class Profile:
     """One size of the grid (docs/experiments.md). Defaults are the paper's protocol."""
 
     name: str
+    # What the profile is, never what it took: that drifts, so it is measured instead (`gcdt
+    # sweep --dry-run` estimates it, results/PROFILE/reproduce.json records a reproduction).
     description: str
     seeds: tuple[int, ...] = paper.SEEDS  # training seeds per grid cell
     # Data: the expert that collects expert trajectories ("tqc": converged TQC+HER agents, as
@@ -211,7 +213,7 @@ STANDARD = dataclasses.replace(
     name="standard",
     description="Table 1 (3 seeds, 20,000 transitions per dataset), Fig. 3 and Fig. 4 (RQ4, "
     "RQ5) on every task with sparse rewards, and two studies beyond the paper (the return "
-    "target, goals outside the training region); 27 h of work, about 14 h on a 2-core CPU",
+    "target, goals outside the training region)",
     expert="scripted",
     # Noisy demonstrations (as in DART, Laskey et al. 2017), the executed action as label:
     # chosen against noise-free data and clean (DART) labels on held-out seeds before the grid
@@ -244,7 +246,7 @@ QUICK = dataclasses.replace(
     STANDARD,
     name="quick",
     description="Table 1 whole (3 seeds) at a quarter of standard's data and budgets, in one "
-    "sitting: under 90 minutes on a 2-core CPU",
+    "sitting",
     # Every Table 1 cell, method and seed of `standard` at about a quarter of its work:
     # TQC+HER's online steps follow the data's size, and the offline budgets shrink with it.
     # This profile checks the pipeline and the comparisons' direction (its published run:

@@ -6,8 +6,8 @@ One module per purpose:
   Markdown, LaTeX), the points of Fig. 3 and Fig. 4 and the studies' tables into
   results/<profile>/, Fig. 2-4, the learning curves and the studies' figures (PNG, PDF) into
   figures/<profile>/, and results/<profile>/report.md with the profile's deviations from the
-  paper; both folders lie under `gcdt.paths.outputs_root()` (the repository, or a
-  reproduction's own).
+  paper and the wall time its reproduce.json records; both folders lie under
+  `gcdt.paths.outputs_root()` (the repository, or a reproduction's own).
 - `gcdt.report.tables`, `figures`, `targets` (the return-target study) and `generalisation`
   (the goal-generalisation study): what those files hold, computed from the run results.
 - `gcdt.report.readme`: the README's results section (`gcdt report --readme`) and
@@ -31,7 +31,7 @@ from gcdt.report.notebook import (
     show,
 )
 from gcdt.report.outputs import write_figures, write_report, write_tables
-from gcdt.report.readme import readme_block, record_reproduction, update_readme
+from gcdt.report.readme import readme_block, record_reproduction, update_readme, wall_time_text
 
 __all__ = [
     "check_parameters",
@@ -47,6 +47,7 @@ __all__ = [
     "tables",
     "targets",
     "update_readme",
+    "wall_time_text",
     "write_figures",
     "write_report",
     "write_tables",

@@ -20,8 +20,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
+from gcdt.baselines.publish import PublishConfig
 from gcdt.baselines.tqc_her import BACKENDS as TQC_BACKENDS
-from gcdt.baselines.tqc_her import TQCRunSettings, tqc_config_names
+from gcdt.baselines.tqc_her import RUN_JSON, TQCRunSettings, tqc_config_names
 from gcdt.data.collect import LABELS
 from gcdt.envs import TASKS, RewardType
 from gcdt.errors import GcdtError
@@ -613,6 +614,44 @@ class TQCTrain(_Command, _Progress):
         return 0
 
 
+@dataclass(frozen=True, kw_only=True)
+class TQCPublish(_Command):
+    """publish a finished TQC+HER run as an agent in results/experts/
+
+    Measure the run's final and best model on validation episodes, keep the better, measure it
+    on held-out episodes, and write model.zip, eval.csv and run.json (with both measurements)
+    to --out. An agent already there is replaced only with --replace, in one swap."""
+
+    name = "tqc publish"
+    run_dir: Path = setting(
+        REQUIRED,
+        "the --out folder of a finished gcdt tqc train run",
+        metavar="RUN_DIR",
+        positional=True,
+    )
+    out: Path | None = setting(
+        None, "the agent's folder (default: results/experts/tqc_TASK_REWARD)", metavar="DIR"
+    )
+    replace: bool = setting(
+        False, "replace the agent of the same task and reward already published in --out"
+    )
+    config: PublishConfig
+
+    def run(self, command: str) -> int:
+        from gcdt.baselines.publish import publish_agent
+
+        out = publish_agent(self.run_dir, self.out, self.config, replace=self.replace)
+        record = json.loads((out / RUN_JSON).read_text())
+        held_out = record["published"]["held_out"]
+        print(
+            f"TQC+HER {record['task']}/{record['reward']}, {record['env_steps']} env steps "
+            f"({record['published']['model']} model): {100 * held_out['success_rate']:.1f} % "
+            f"success, return {held_out['mean_return']:.2f} on {held_out['episodes']} "
+            f"held-out episodes: {out}"
+        )
+        return 0
+
+
 _PROFILE_HELP = "the size of the grid (docs/experiments.md)"
 
 
@@ -702,8 +741,9 @@ class Report(_Command):
     """tables and figures of the paper from results/PROFILE/runs/
 
     Write Table 1 and the ablation table (CSV, Markdown, LaTeX), Fig. 2-4 and the learning
-    curves (PNG, PDF) from a profile's finished runs (results/ and figures/ under
-    $GCDT_OUTPUTS when set, else the repository's)."""
+    curves (PNG, PDF) from a profile's finished runs, and results/experts/table1_tqc.{md,csv}
+    from the published TQC+HER agents (results/ and figures/ under $GCDT_OUTPUTS when set,
+    else the repository's)."""
 
     name = "report"
     profile: str = setting(REQUIRED, _PROFILE_HELP, choices=PROFILES)
@@ -822,6 +862,7 @@ COMMANDS: tuple[type[_Command], ...] = (
     DatasetCard,
     Train,
     TQCTrain,
+    TQCPublish,
     Sweep,
     Report,
     Compare,

@@ -101,6 +101,48 @@ def atomic_write(path: str | Path, binary: bool = False) -> Iterator[IO[Any]]:
         raise
 
 
+def swap_dirs(a: str | Path, b: str | Path) -> None:
+    """Exchange the folders `a` and `b` (both must exist, on one file system): how a folder
+    is replaced whole, by swapping a finished copy in and then deleting the old one.
+
+    On Linux one `renameat2(RENAME_EXCHANGE)` call swaps them, so a reader sees the old folder
+    or the new one, never neither. Where the call is missing (another OS, an old kernel or C
+    library, a file system without it) three renames do it, and a failed second rename puts
+    the first one back.
+    """
+    a, b = Path(a), Path(b)
+    if _exchange(a, b):
+        return
+    aside = b.with_name(f".{b.name}.{secrets.token_hex(4)}.swap")
+    os.rename(b, aside)
+    try:
+        os.rename(a, b)
+    except BaseException:
+        os.rename(aside, b)
+        raise
+    os.rename(aside, a)
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap `a` and `b` with Linux's `renameat2(RENAME_EXCHANGE)`; False where it is missing."""
+    import ctypes
+    import errno
+
+    try:
+        renameat2 = ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError, TypeError):  # not glibc >= 2.28, or not Linux
+        return False
+    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p]
+    renameat2.argtypes += [ctypes.c_uint]
+    at_cwd, exchange = -100, 2  # AT_FDCWD, RENAME_EXCHANGE (linux/fcntl.h, linux/fs.h)
+    if renameat2(at_cwd, os.fsencode(a), at_cwd, os.fsencode(b), exchange) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP):  # no kernel or file-system support
+        return False
+    raise OSError(code, os.strerror(code), str(a), None, str(b))
+
+
 def _create_temp(path: Path) -> tuple[int, Path]:
     """A new, exclusive `.NAME.RANDOM.tmp` next to `path`, created as `open()` would create it.
 

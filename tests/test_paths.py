@@ -9,7 +9,13 @@ import torch
 
 from gcdt.checkpoint import save_checkpoint
 from gcdt.errors import GcdtError
-from gcdt.paths import atomic_write, check_writable, write_if_changed, write_json_atomic
+from gcdt.paths import (
+    atomic_write,
+    check_writable,
+    swap_dirs,
+    write_if_changed,
+    write_json_atomic,
+)
 from gcdt.training import _write_log
 
 
@@ -127,3 +133,34 @@ def test_check_writable_refuses_read_only_folders_and_files(tmp_path):
             check_writable(ro_file)
     finally:
         locked.chmod(0o755)
+
+
+@pytest.mark.parametrize("exchange", [True, False], ids=["renameat2", "three-renames"])
+def test_swap_dirs_exchanges_two_folders_whole(tmp_path, monkeypatch, exchange):
+    import gcdt.paths
+
+    if not exchange:  # another OS, or a file system without RENAME_EXCHANGE
+        monkeypatch.setattr(gcdt.paths, "_exchange", lambda a, b: False)
+    (old := tmp_path / "agent").mkdir()
+    (new := tmp_path / ".agent.new").mkdir()
+    (old / "model.zip").write_text("old")
+    (new / "model.zip").write_text("new")
+    (new / "eval.csv").write_text("curve")
+    swap_dirs(new, old)
+    assert sorted(p.name for p in old.iterdir()) == ["eval.csv", "model.zip"]
+    assert (old / "model.zip").read_text() == "new"
+    assert [p.name for p in new.iterdir()] == ["model.zip"]
+    assert (new / "model.zip").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".agent.new", "agent"]
+
+
+def test_swap_dirs_puts_the_old_folder_back_when_the_new_cannot_move(tmp_path, monkeypatch):
+    import gcdt.paths
+
+    monkeypatch.setattr(gcdt.paths, "_exchange", lambda a, b: False)
+    (old := tmp_path / "agent").mkdir()
+    (old / "model.zip").write_text("old")
+    with pytest.raises(FileNotFoundError):
+        swap_dirs(tmp_path / "missing", old)
+    assert [p.name for p in tmp_path.iterdir()] == ["agent"]
+    assert (old / "model.zip").read_text() == "old"

@@ -326,3 +326,82 @@ def test_online_offline_figure_sets_agents_curves_beside_offline_runs(runs, tmp_
     np.testing.assert_allclose(np.asarray(gcdt.get_ydata(), dtype=float), expected)
     assert not [line for line in reach.lines if "published agent" in line.get_label()]
     assert tables.load_agent_curves(tmp_path / "none").empty
+
+
+def _agent(root, task, reward, env_steps, curve, held_out=None, n_envs=8):
+    """A published agent's folder as `gcdt tqc publish` writes it (`held_out`: its held-out
+    success and return; None: published before held-out measurements, without a record)."""
+    folder = root / f"tqc_{task}_{reward}"
+    folder.mkdir(parents=True)
+    record = {"task": task, "reward": reward, "seed": 0, "env_steps": env_steps}
+    record["config"] = {"n_envs": n_envs}
+    if held_out is not None:
+        success, ret, episodes = held_out
+        measured = {"success_rate": success, "mean_return": ret, "std_return": 2.0}
+        record["published"] = {"held_out": {**measured, "episodes": episodes, "seed": 5000}}
+    (folder / "run.json").write_text(json.dumps(record))
+    rows = [f"{steps},1.0,1.0,{success},-10.0,100" for steps, success in curve]
+    header = "env_steps,train_seconds,wall_seconds,success_rate,mean_return,episodes"
+    (folder / "eval.csv").write_text("\n".join([header, *rows]) + "\n")
+
+
+def test_agents_table_puts_each_published_agent_beside_the_papers_tqc_cell(tmp_path, monkeypatch):
+    from gcdt.report import agents
+
+    experts = tmp_path / "experts"
+    curve = [(25_000, 0.1), (100_000, 0.4), (250_000, 0.7), (500_000, 0.8), (1_000_000, 0.88)]
+    _agent(experts, "push", "sparse", 1_000_000, curve, held_out=(0.9, -6.5, 500))
+    # Evaluations land up to one loop iteration (n_envs steps) past a mark: 100,003 is the
+    # 100k evaluation of 8 envs, 250,010 is past 250k's.
+    short = [(100_003, 0.25), (250_010, 0.6), (300_000, 0.65)]
+    _agent(experts, "pick_and_place", "dense", 300_000, short, held_out=(0.5, -20.0, 200))
+    _agent(experts, "push", "dense", 300_000, [(100_000, 0.3)])  # no held-out record
+    table = agents.agents_table(experts).set_index(["task", "reward"])
+    assert list(table.index) == [
+        (task, reward)
+        for task in ("reach", "push", "pick_and_place")
+        for reward in ("dense", "sparse")
+    ]
+    push = table.loc[("push", "sparse")]
+    assert push["status"] == "published" and push["seeds"] == 1
+    assert (push["success"], push["return"], push["env_steps"]) == (90.0, -6.5, 1_000_000)
+    # Wilson's 95 % interval of 450 successes in 500 episodes.
+    assert push[["success_ci_low", "success_ci_high"]].tolist() == pytest.approx(
+        [87.058, 92.332], abs=1e-3
+    )
+    assert push["held_out_episodes"] == 500
+    assert (push["paper_success"], push["paper_return"]) == (99.5, -4.54)
+    assert push["paper_steps"] == 1_000_000
+    assert push[[f"curve_success_{b}" for b in agents.CURVE_BUDGETS]].tolist() == pytest.approx(
+        [40.0, 70.0, 80.0, 88.0]
+    )
+    pick = table.loc[("pick_and_place", "dense")]
+    assert pick["curve_success_100000"] == 25.0
+    assert pick[["curve_success_250000", "curve_success_1000000"]].isna().all()
+    assert table.loc[("push", "dense"), "status"] == "no held-out record"
+    assert np.isnan(table.loc[("push", "dense"), "success"])
+    missing = table.loc[("pick_and_place", "sparse")]
+    assert missing["status"] == "not yet published" and missing["seeds"] == 0
+    assert (missing["paper_success"], missing["paper_return"]) == (77.0, -16.96)
+    assert pd.isna(missing["env_steps"]) and np.isnan(missing["success"])
+    assert table.loc[("reach", "sparse"), "paper_steps"] == 20_000
+
+    # `gcdt report` writes it under the outputs root, as Markdown and CSV.
+    monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path / "out"))
+    md, csv = report.write_agents_table(experts)
+    assert md == tmp_path / "out" / "results" / "experts" / "table1_tqc.md"
+    lines = md.read_text().splitlines()
+    assert (
+        "| Push | sparse | 90.0 [87.1, 92.3] | -6.50 | 1,000,000 | 1 | 99.5 | -4.54 | 1,000,000 "
+        "| 40.0 | 70.0 | 80.0 | 88.0 |" in lines
+    )
+    assert (
+        "| PickAndPlace | sparse | not yet published | – | – | 0 | 77.0 | -16.96 | 1,000,000 "
+        "| – | – | – | – |" in lines
+    )
+    assert (
+        "| Push | dense | no held-out record | – | 300,000 | 1 | 98.7 | -1.04 |" in md.read_text()
+    )
+    written = pd.read_csv(csv).set_index(["task", "reward"])
+    assert written.loc[("push", "sparse"), "success"] == 90.0
+    assert written.loc[("reach", "dense"), "status"] == "not yet published"

@@ -453,15 +453,41 @@ def _all_weights(zip_path) -> list[np.ndarray]:
     return [np.asarray(leaf) for leaf in jax.tree_util.tree_leaves(states)]
 
 
+def _add_to_clock(path, seconds):
+    """Rewrite checkpoint `path` as if its run had taken `seconds` more wall and CPU time
+    before it (the learning-speed mark moves with the clock: the rate since it is unchanged)."""
+    import hashlib
+    import struct
+
+    import cloudpickle
+
+    from gcdt.baselines.tqc_checkpoint import MAGIC, _read
+
+    header, payload = _read(path, payload=True)
+    extra = payload["extra"]
+    extra["clock"] = {k: v + seconds for k, v in extra["clock"].items()}
+    step, wall, eval_seconds = extra["evaluation"]["learning_mark"]
+    extra["evaluation"]["learning_mark"] = (step, wall + seconds, eval_seconds)
+    blob = cloudpickle.dumps(payload)
+    header |= {"payload_bytes": len(blob), "payload_sha256": hashlib.sha256(blob).hexdigest()}
+    head = json.dumps(header, sort_keys=True).encode()
+    path.write_bytes(MAGIC + struct.pack("<Q", len(head)) + head + blob)
+    return extra["clock"]
+
+
 def test_a_killed_run_resumes_and_finishes_as_one_run(checkpointed, tmp_path):
     """`--resume` after SIGKILL: the run ends with the full budget, one curve point per
-    evaluation mark, no checkpoint left behind, and the weights of the same run left alone
-    (on the same machine)."""
+    evaluation mark, no checkpoint left behind, the weights of the same run left alone (on
+    the same machine), and run.json's times and core-hours over the whole run."""
     from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE, read_header
 
     out = tmp_path / "run"
     shutil.copytree(checkpointed, out)
     assert 1000 < read_header(out / CHECKPOINT_FILE)["env_steps"] < 1600
+    # A day before the kill: far more than the resumed part can take, so a record of the
+    # last invocation alone would show.
+    day = 86_400.0
+    before = _add_to_clock(out / CHECKPOINT_FILE, day)
     assert main(_reach_argv(out, "--resume")) == 0
     assert main(_reach_argv(tmp_path / "uninterrupted")) == 0
     resumed = _all_weights(out / "model.zip")
@@ -473,8 +499,21 @@ def test_a_killed_run_resumes_and_finishes_as_one_run(checkpointed, tmp_path):
     assert record["env_steps"] == 1600 and record["resumes"] == 1
     assert "--resume" not in record["command"]  # the command that started the run
     with open(out / "eval.csv", newline="") as f:
-        assert [int(r["env_steps"]) for r in csv.DictReader(f)] == [800, 1600]
+        rows = list(csv.DictReader(f))
+    assert [int(r["env_steps"]) for r in rows] == [800, 1600]
+    assert float(rows[0]["wall_seconds"]) < day < float(rows[1]["wall_seconds"])
     assert not (out / CHECKPOINT_FILE).exists()
+    # The times cover the whole run: what the checkpoint carried and the resumed part.
+    assert record["wall_seconds"] >= before["wall"]
+    assert record["core_hours"] >= before["cpu"] / 3600 - 0.001  # rounded to 3.6 s
+    assert record["train_seconds"] == pytest.approx(
+        record["wall_seconds"] - record["eval_seconds"], abs=0.02
+    )
+    rate = 1600 / record["train_seconds"]
+    assert record["env_steps_per_second"] == pytest.approx(rate, abs=0.005)  # 2 decimals
+    # The learning speed counts from its mark, which moved with the clock: counted from the
+    # day before, it would be under 1,600 steps a day.
+    assert record["learning_steps_per_second"] > 1600 / day
 
 
 def test_resume_without_a_checkpoint_is_one_line_exit_2(assert_usage_error, tmp_path):
@@ -575,3 +614,81 @@ def test_publish_refuses_an_unfinished_run(checkpointed, tmp_path):
     with pytest.raises(GcdtError, match="unfinished TQC\\+HER run: finish it with --resume"):
         publish_agent(checkpointed, tmp_path / "agent")
     assert not (tmp_path / "agent").exists()
+
+
+def _fake_finished_run(folder, task="push", reward="sparse"):
+    """A folder with a finished run's files (the models are not zips: every refusal below
+    comes before anything is measured)."""
+    folder.mkdir(parents=True)
+    (folder / "run.json").write_text(json.dumps({"task": task, "reward": reward}))
+    for name in ("eval.csv", "model.zip", "best_model.zip"):
+        (folder / name).write_text("x")
+    return folder
+
+
+def _fake_agent(folder, task="push", reward="sparse"):
+    folder.mkdir(parents=True)
+    (folder / "run.json").write_text(json.dumps({"task": task, "reward": reward, "old": True}))
+    (folder / "model.zip").write_text("the old agent")
+    return _unchanged(folder)
+
+
+@pytest.mark.parametrize(
+    ("case", "message"),
+    [
+        ("missing", "no run folder at"),
+        ("unfinished", "unfinished TQC+HER run: finish it with --resume"),
+        ("taken", "already holds a published agent: pass --replace to replace it"),
+        ("other task", "holds a reach/sparse agent, not push/sparse"),
+        ("not an agent", "is not a published agent's folder"),
+    ],
+)
+def test_tqc_publish_refuses_bad_input_in_one_line(assert_usage_error, tmp_path, case, message):
+    run, out = tmp_path / "run", tmp_path / "experts" / "tqc_push_sparse"
+    argv = ["tqc", "publish", str(run), "--out", str(out)]
+    if case != "missing":
+        _fake_finished_run(run)
+    if case == "unfinished":  # killed before its end: a checkpoint, no run.json
+        (run / "run.json").unlink()
+        (run / "checkpoint.tqc").write_text("x")
+    if case in ("taken", "other task"):
+        before = _fake_agent(out, task="reach" if case == "other task" else "push")
+    if case == "not an agent":
+        out.mkdir(parents=True)
+        (out / "notes.txt").write_text("mine")
+        before = _unchanged(out)
+    replace = ["--replace"] if case in ("other task", "not an agent") else []
+    assert_usage_error([*argv, *replace], message)
+    if case in ("taken", "other task", "not an agent"):
+        assert _unchanged(out) == before  # nothing overwritten
+        assert [p.name for p in out.parent.iterdir()] == [out.name]  # nothing staged
+    else:
+        assert not out.parent.exists()
+
+
+def test_tqc_publish_replace_swaps_the_old_agent_for_the_new_one_whole(
+    push_run, tmp_path, capsys, monkeypatch
+):
+    out = tmp_path / "experts" / "tqc_push_sparse"
+    _fake_agent(out)
+    argv = ["tqc", "publish", str(push_run.out_dir), "--out", str(out), "--replace"]
+    argv += ["--validation-episodes", "2", "--held-out-episodes", "3"]
+    # A publication that fails while measuring leaves the old agent as it was.
+    import gcdt.baselines.publish as publish
+
+    before = _unchanged(out)
+    with monkeypatch.context() as m:
+        m.setattr(publish, "_measure", lambda *a, **k: 1 / 0)
+        with pytest.raises(ZeroDivisionError):
+            main(argv)
+    assert _unchanged(out) == before
+    assert main(argv) == 0
+    assert f"on 3 held-out episodes: {out}" in capsys.readouterr().out
+    assert sorted(p.name for p in out.iterdir()) == ["eval.csv", "model.zip", "run.json"]
+    record = json.loads((out / "run.json").read_text())
+    assert "old" not in record and record["published"]["held_out"]["episodes"] == 3
+    # The run's accounting travels with the agent.
+    run = json.loads((push_run.out_dir / "run.json").read_text())
+    keys = ("env_steps", "train_seconds", "wall_seconds", "env_steps_per_second", "core_hours")
+    assert {k: record[k] for k in (*keys, "resumes")} == {k: run[k] for k in (*keys, "resumes")}
+    assert [p.name for p in out.parent.iterdir()] == [out.name]  # the old one is gone

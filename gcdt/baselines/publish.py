@@ -4,8 +4,12 @@ A run leaves two models, the last one and the best one by its periodic evaluatio
 the best by those same evaluations would flatter it, so both are measured again on fresh
 validation episodes and the better one is published; it is then measured once more, on held-out
 episodes that neither training, the periodic evaluations nor the validation saw. The folder
-holds `model.zip` (at most `MAX_ZIP_MIB`), the run's `eval.csv`, and its `run.json` extended
-with the curve and a `published` record of the choice and both measurements.
+holds `model.zip` (at most `MAX_ZIP_MIB`), the run's `eval.csv`, and its `run.json` (with
+its env steps, times, env steps/s and core-hours over the whole run, every resume included)
+extended with the curve and a `published` record of the choice and both measurements.
+
+`gcdt tqc publish RUN_DIR` runs it. An agent already published in the folder is replaced only
+when asked (`replace`), and then in one swap: readers see the old agent or the new one.
 """
 
 from __future__ import annotations
@@ -21,8 +25,9 @@ from typing import Any
 from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE
 from gcdt.baselines.tqc_her import BEST_MODEL_ZIP, EVAL_CSV, MODEL_ZIP, RUN_JSON
 from gcdt.errors import GcdtError
-from gcdt.paths import REPO_ROOT, write_json_atomic
+from gcdt.paths import REPO_ROOT, check_writable, swap_dirs, write_json_atomic
 from gcdt.provenance import git_commit, utc_now
+from gcdt.settings import check_minimums, setting
 
 AGENTS_DIR = REPO_ROOT / "results" / "experts"
 #: Episode seeds of the validation and of the held-out measurement: apart from each other and
@@ -37,13 +42,18 @@ CANDIDATES = {"final": MODEL_ZIP, "best": BEST_MODEL_ZIP}
 class PublishConfig:
     """What `publish_agent` measures: episodes per validation and held-out evaluation."""
 
-    validation_episodes: int = 200
-    held_out_episodes: int = 500
+    validation_episodes: int = setting(
+        200,
+        "episodes on which the final and the best model are compared",
+        minimum=1,
+        metavar="N",
+    )
+    held_out_episodes: int = setting(
+        500, "held-out episodes on which the chosen model is measured", minimum=1, metavar="N"
+    )
 
     def __post_init__(self) -> None:
-        for name in ("validation_episodes", "held_out_episodes"):
-            if getattr(self, name) < 1:
-                raise GcdtError(f"{name} must be >= 1, got {getattr(self, name)}")
+        check_minimums(self)
 
 
 def agent_dir(task: str, reward: str, root: str | Path = AGENTS_DIR) -> Path:
@@ -53,6 +63,8 @@ def agent_dir(task: str, reward: str, root: str | Path = AGENTS_DIR) -> Path:
 
 def _finished_run(run: Path) -> dict[str, Any]:
     """The run's record, refusing a folder that is not a finished `gcdt tqc train` run."""
+    if not run.is_dir():
+        raise GcdtError(f"no run folder at {run}: give the --out folder of a gcdt tqc train run")
     if (run / CHECKPOINT_FILE).exists():
         raise GcdtError(f"{run} holds an unfinished TQC+HER run: finish it with --resume first")
     missing = [n for n in (RUN_JSON, EVAL_CSV, *CANDIDATES.values()) if not (run / n).is_file()]
@@ -78,17 +90,42 @@ def _measure(zip_path: Path, task: str, reward: str, episodes: int, seed: int) -
     return {"seed": seed, **{k: summary[k] for k in keep}}
 
 
+def _check_out(out: Path, task: str, reward: str, replace: bool) -> None:
+    """Refuse an existing `out` unless `replace` is asked and it holds an agent of the same
+    task and reward (anything else there is not a published agent's to swap)."""
+    check_writable(out.parent, folder=True)  # the new agent is built beside `out`
+    if not out.exists() and not out.is_symlink():
+        return
+    record = out / RUN_JSON
+    if out.is_symlink() or not out.is_dir() or not record.is_file():
+        raise GcdtError(f"{out} exists and is not a published agent's folder: choose another --out")
+    if not replace:
+        raise GcdtError(
+            f"{out} already holds a published agent: pass --replace to replace it "
+            "(git history keeps the old one)"
+        )
+    old = json.loads(record.read_text())
+    if (old.get("task"), old.get("reward")) != (task, reward):
+        raise GcdtError(
+            f"{out} holds a {old.get('task')}/{old.get('reward')} agent, not {task}/{reward}: "
+            "choose the --out of this task and reward"
+        )
+
+
 def publish_agent(
-    run: str | Path, out: str | Path | None = None, config: PublishConfig = PublishConfig()
+    run: str | Path,
+    out: str | Path | None = None,
+    config: PublishConfig = PublishConfig(),
+    replace: bool = False,
 ) -> Path:
     """Publish the finished run in `run` (default folder: `agent_dir(task, reward)`); returns
-    the folder. An existing folder is refused: a published agent is replaced on purpose only."""
+    the folder. An agent already there is refused unless `replace` (of the same task and
+    reward); it is then swapped for the new one whole."""
     run = Path(run)
     record = _finished_run(run)
     task, reward = record["task"], record["reward"]
     out = Path(out) if out is not None else agent_dir(task, reward)
-    if out.exists():
-        raise GcdtError(f"{out} already holds a published agent: remove it to replace it")
+    _check_out(out, task, reward, replace)  # before minutes of measuring, not after
     validation = {
         name: _measure(run / zip_name, task, reward, config.validation_episodes, VALIDATION_SEED)
         for name, zip_name in CANDIDATES.items()
@@ -110,15 +147,18 @@ def publish_agent(
         "created": utc_now(),
         "git_commit": git_commit(),
     }
-    # Built beside `out` and renamed into place: a stop leaves no half-published agent.
+    # Built beside `out` and renamed (or swapped) into place: a stop leaves no half-published
+    # agent, and a replaced one is whole until the new one is.
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
         shutil.copyfile(run / CANDIDATES[chosen], staging / MODEL_ZIP)
         shutil.copyfile(run / EVAL_CSV, staging / EVAL_CSV)
         write_json_atomic(staging / RUN_JSON, {**record, "curve": curve, "published": published})
-        staging.rename(out)
-    except BaseException:
+        if out.exists():
+            swap_dirs(staging, out)  # `replace` was checked above; staging now holds the old
+        else:
+            staging.rename(out)
+    finally:
         shutil.rmtree(staging, ignore_errors=True)
-        raise
     return out

@@ -8,8 +8,11 @@ One module per purpose:
   figures/<profile>/, and results/<profile>/report.md with the profile's deviations from the
   paper and the wall time its reproduce.json records; both folders lie under
   `gcdt.paths.outputs_root()` (the repository, or a reproduction's own).
+  `write_agents_table()` (part of `write_report`) writes results/experts/table1_tqc.{md,csv}
+  there from the published TQC+HER agents.
 - `gcdt.report.tables`, `figures`, `targets` (the return-target study) and `generalisation`
-  (the goal-generalisation study): what those files hold, computed from the run results.
+  (the goal-generalisation study): what those files hold, computed from the run results;
+  `agents`: Table 1's TQC+HER cells from the published agents.
 - `gcdt.report.readme`: the README's results section (`gcdt report --readme`) and
   results/<profile>/reproduce.json, the wall time `make reproduce` measured.
 - `gcdt.report.reproduction`: a reproduction checked against the published results, and
@@ -21,7 +24,7 @@ The names below are importable from `gcdt.report` itself.
 
 from __future__ import annotations
 
-from gcdt.report import figures, generalisation, tables, targets
+from gcdt.report import agents, figures, generalisation, tables, targets
 from gcdt.report.notebook import (
     check_parameters,
     notebook_figures_dir,
@@ -30,10 +33,11 @@ from gcdt.report.notebook import (
     run_grid,
     show,
 )
-from gcdt.report.outputs import write_figures, write_report, write_tables
+from gcdt.report.outputs import write_agents_table, write_figures, write_report, write_tables
 from gcdt.report.readme import readme_block, record_reproduction, update_readme, wall_time_text
 
 __all__ = [
+    "agents",
     "check_parameters",
     "figures",
     "generalisation",
@@ -48,6 +52,7 @@ __all__ = [
     "targets",
     "update_readme",
     "wall_time_text",
+    "write_agents_table",
     "write_figures",
     "write_report",
     "write_tables",

@@ -6,10 +6,14 @@ from pathlib import Path
 
 import pandas as pd
 
+from gcdt.baselines.publish import AGENTS_DIR
 from gcdt.experiments.profiles import Profile, deviations_text
-from gcdt.paths import results_dir, write_if_changed
-from gcdt.report import figures, generalisation, tables, targets
+from gcdt.paths import REPO_ROOT, outputs_root, results_dir, write_if_changed
+from gcdt.report import agents, figures, generalisation, tables, targets
 from gcdt.report.readme import wall_time_text
+
+#: Table 1's TQC+HER cells from the published agents, beside them (`gcdt.report.agents`).
+AGENTS_TABLE = "table1_tqc"
 
 
 def write_tables(profile: Profile, runs) -> list[Path]:
@@ -72,12 +76,24 @@ def write_figures(profile: Profile, runs) -> list[Path]:
     return written
 
 
+def write_agents_table(agents_dir: str | Path = AGENTS_DIR) -> list[Path]:
+    """Table 1's TQC+HER cells from the agents published in `agents_dir` (Markdown, CSV),
+    written to results/experts/ under `outputs_root()`; the paths written."""
+    out = outputs_root() / AGENTS_DIR.relative_to(REPO_ROOT)
+    table = agents.agents_table(agents_dir)
+    files = {".md": agents.agents_markdown(table) + "\n", ".csv": _csv(table)}
+    for suffix, text in files.items():
+        write_if_changed(out / f"{AGENTS_TABLE}{suffix}", text)
+    return [out / f"{AGENTS_TABLE}{suffix}" for suffix in files]
+
+
 def write_report(profile: Profile) -> list[Path]:
-    """Every table and results figure of `profile` from its run results, and report.md: the
-    deviations from the paper, Table 1 and what the results cost (`wall_time_text`: record
-    a reproduction before writing its report); the paths written."""
+    """Every table and results figure of `profile` from its run results, the published
+    agents' table (`write_agents_table`), and report.md: the deviations from the paper,
+    Table 1 and what the results cost (`wall_time_text`: record a reproduction before writing
+    its report); the paths written."""
     runs = tables.load_runs(profile)
-    written = write_tables(profile, runs) + write_figures(profile, runs)
+    written = write_tables(profile, runs) + write_figures(profile, runs) + write_agents_table()
     report = results_dir(profile.name) / "report.md"
     table1 = tables.to_markdown(tables.table1(runs))
     write_if_changed(

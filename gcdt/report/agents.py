@@ -1,0 +1,172 @@
+"""Table 1's TQC+HER cells from the published agents (`results/experts/tqc_*/`) alone.
+
+One row per task and reward of the paper's TQC+HER row: the agent's held-out success rate
+(`gcdt tqc publish`'s measurement; 95 % interval: Wilson over its episodes with one seed,
+bootstrap over seeds with several) and return, its online env steps and seeds, the paper's
+values and budget, and the agent's success at smaller budgets read from its learning curve
+(the periodic evaluations of training, on their own episodes). A cell without a published
+agent is a "not yet published" row, and an agent published without a held-out measurement
+(before `gcdt tqc publish`) shows its curve only. Written by `gcdt report` to
+`results/experts/table1_tqc.{md,csv}`.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from gcdt.baselines.publish import AGENTS_DIR, HELD_OUT_SEED
+from gcdt.baselines.tqc_her import RUN_JSON, load_tqc_config
+from gcdt.report.tables import PAPER_TABLE1, TASK_NAMES, aggregate, load_agent_curves
+
+#: The budgets (env steps) at which the learning curves are read, where they reach them.
+CURVE_BUDGETS = (100_000, 250_000, 500_000, 1_000_000)
+#: A row's state: measured held out, published before held-out measurements, or missing.
+PUBLISHED, NO_HELD_OUT, NOT_PUBLISHED = "published", "no held-out record", "not yet published"
+#: The table's columns (success in %, the interval's bounds too).
+COLUMNS = [
+    "task",
+    "reward",
+    "status",
+    "success",
+    "success_ci_low",
+    "success_ci_high",
+    "return",
+    "held_out_episodes",
+    "env_steps",
+    "seeds",
+    "paper_success",
+    "paper_return",
+    "paper_steps",
+    *(f"curve_success_{budget}" for budget in CURVE_BUDGETS),
+]
+
+
+def load_agents(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:
+    """One row per published agent: task, reward, seed, agent, env_steps, n_envs and its
+    held-out measurement (success_rate, mean_return, std_return, episodes; NaN without one)."""
+    rows = []
+    measurement = ("success_rate", "mean_return", "std_return", "episodes")
+    for path in sorted(Path(agents_dir).glob(f"tqc_*/{RUN_JSON}")):
+        record = json.loads(path.read_text())
+        held_out = record.get("published", {}).get("held_out", {})
+        rows.append(
+            {
+                "task": record["task"],
+                "reward": record["reward"],
+                "seed": record["seed"],
+                "agent": path.parent.name,
+                "env_steps": record["env_steps"],
+                "n_envs": record["config"]["n_envs"],
+                **{key: held_out.get(key, np.nan) for key in measurement},
+            }
+        )
+    columns = ["task", "reward", "seed", "agent", "env_steps", "n_envs", *measurement]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def _curve_success(curve: pd.DataFrame, budget: int, n_envs: int) -> float:
+    """Success (%) of the evaluation made at `budget` steps (one loop iteration of `n_envs`
+    steps may carry it past), NaN where the curve has none."""
+    at = curve[(curve["env_steps"] >= budget) & (curve["env_steps"] < budget + n_envs)]
+    return 100 * float(at["success_rate"].iloc[0]) if len(at) else np.nan
+
+
+def agents_table(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:
+    """Every TQC+HER cell of Table 1 (task-major), ours beside the paper's (see the module)."""
+    agents, curves = load_agents(agents_dir), load_agent_curves(agents_dir)
+    rows = []
+    for task in TASK_NAMES:
+        for reward in ("dense", "sparse"):
+            paper_return, paper_success = PAPER_TABLE1[(reward, "tqc")][task]
+            row = {
+                "task": task,
+                "reward": reward,
+                "status": NOT_PUBLISHED,
+                "seeds": 0,
+                "paper_success": paper_success,
+                "paper_return": paper_return,
+                "paper_steps": load_tqc_config("paper", task).steps,
+            }
+            cell = agents[(agents["task"] == task) & (agents["reward"] == reward)]
+            if len(cell):
+                row |= _ours(cell, curves)
+            rows.append(row)
+    counts = {"held_out_episodes": "Int64", "env_steps": "Int64"}  # blank where unpublished
+    return pd.DataFrame(rows, columns=COLUMNS).astype(counts)
+
+
+def _ours(cell: pd.DataFrame, curves: pd.DataFrame) -> dict:
+    """A cell's agents (one per seed): held-out success and return over seeds, the least
+    online steps among them, and at each budget the mean over seeds of their curves'
+    success where every seed's curve has that budget."""
+    row: dict = {"seeds": len(cell), "env_steps": int(cell["env_steps"].min())}
+    measured = cell.dropna(subset=["success_rate"])
+    if len(measured) == len(cell):
+        stats = aggregate(measured.assign(group=0), ["group"]).iloc[0]
+        row |= {
+            "status": PUBLISHED,
+            "success": stats["success_mean"],
+            "success_ci_low": stats["success_ci_low"],
+            "success_ci_high": stats["success_ci_high"],
+            "return": stats["return_mean"],
+            "held_out_episodes": int(cell["episodes"].sum()),
+        }
+    else:
+        row["status"] = NO_HELD_OUT
+    for budget in CURVE_BUDGETS:
+        values = [
+            _curve_success(curves[curves["agent"] == agent.agent], budget, agent.n_envs)
+            for agent in cell.itertuples()
+        ]
+        row[f"curve_success_{budget}"] = np.mean(values) if not np.isnan(values).any() else np.nan
+    return row
+
+
+def _number(value: float, fmt: str) -> str:
+    return "–" if pd.isna(value) else format(value, fmt)
+
+
+def _steps(steps: float) -> str:
+    """1,000,000 -> '1M', 250,000 -> '250k'."""
+    return f"{steps / 1e6:g}M" if steps >= 1e6 else f"{steps / 1e3:g}k"
+
+
+def agents_markdown(table: pd.DataFrame) -> str:
+    """`agents_table` as a Markdown document: what it shows, then one row per cell ('not yet
+    published' where no agent is)."""
+    budgets = " | ".join(f"Curve {_steps(b)}" for b in CURVE_BUDGETS)
+    lines = [
+        "| Task | Reward | Held-out success % [95 %] | Held-out return | Online steps | Seeds "
+        f"| Paper success % | Paper return | Paper steps | {budgets} |",
+        "|---|---|---|---|---|---|---|---|---|" + "---|" * len(CURVE_BUDGETS),
+    ]
+    for r in table.to_dict("records"):
+        if r["status"] == PUBLISHED:
+            ours = (
+                f"{r['success']:.1f} [{r['success_ci_low']:.1f}, {r['success_ci_high']:.1f}] "
+                f"| {r['return']:.2f}"
+            )
+        else:
+            ours = f"{r['status']} | –"
+        steps = f"{int(r['env_steps']):,}" if r["status"] != NOT_PUBLISHED else "–"
+        curve = [_number(r.get(f"curve_success_{b}", np.nan), ".1f") for b in CURVE_BUDGETS]
+        lines.append(
+            f"| {TASK_NAMES[r['task']]} | {r['reward']} | {ours} | {steps} | {r['seeds']} "
+            f"| {r['paper_success']:.1f} | {r['paper_return']:.2f} | {r['paper_steps']:,} "
+            f"| {' | '.join(curve)} |"
+        )
+    intro = (
+        "# Table 1, TQC+HER: the published agents beside the paper\n\n"
+        "Generated by `gcdt report` from `results/experts/tqc_*/` (`gcdt tqc publish`). "
+        f"Held-out: the published model on its held-out episodes (seed {HELD_OUT_SEED}), "
+        "success with "
+        "its 95 % interval (Wilson over episodes for one seed, bootstrap over seeds for "
+        "several). Curve N: success % of training's periodic evaluation at N env steps (its "
+        "own episodes), where the run reached N. Paper: Table 1's TQC+HER values and the "
+        "budget of its config (`gcdt/baselines/tqc_her.yaml`, `paper`)."
+    )
+    return intro + "\n\n" + "\n".join(lines)

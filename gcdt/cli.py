@@ -701,7 +701,8 @@ class Sweep(_Command, _Progress):
         for warning in summary.warnings:
             print(f"warning: {warning}", file=sys.stderr)
         print("\n".join(summary.lines()))
-        return 0 if summary.ok else 1
+        # Runs left waiting: the profile is not done, and `make reproduce` must not go on.
+        return 0 if summary.ok and not summary.waiting else 1
 
     def _dry_run(self, profile) -> int:
         from gcdt.experiments import plan, results_dir
@@ -722,8 +723,11 @@ class Sweep(_Command, _Progress):
         todo = [p for p in planned if p.state != "done"]
         workers = self.workers or default_workers(profile)
         shared = shared_cost(todo, costs)
-        for section, (runs, seconds) in section_costs(todo).items():
-            print(f"section {section}: {runs} runs to run, about {seconds / 3600:.1f} h of work")
+        for section, (runs, waiting, seconds) in section_costs(todo).items():
+            also = f" ({waiting} of them waiting)" if waiting else ""
+            print(
+                f"section {section}: {runs} runs to run{also}, about {seconds / 3600:.1f} h of work"
+            )
         print(f"datasets and TQC+HER experts to make: about {shared / 3600:.1f} h of work")
         if waiting := [p for p in todo if p.state == "waiting"]:
             agents = sorted({p.problem for p in waiting})

@@ -660,6 +660,8 @@ def test_large_profile_keeps_the_papers_data_and_evaluation():
         dataclasses.replace(large, section_order=("table1",))
     with pytest.raises(GcdtError, match="the budget check needs fixed train_steps"):
         dataclasses.replace(large, train_steps=None)
+    with pytest.raises(GcdtError, match=r"from the published agents \(tqc_agents\) or from grid"):
+        dataclasses.replace(large, table1_tqc=Scope())
 
 
 def _publish_fake_agent(folder: Path, steps: int, success: float) -> None:
@@ -700,6 +702,7 @@ def test_runs_wait_for_their_published_agent(tmp_path, monkeypatch):
     assert "2 waiting" in summary.line()
     assert summary.lines()[1] == f"waiting: 2 runs for {agent / 'model.zip'} (not published, " \
         "or not of agent_steps)"  # fmt: skip
+    assert "gcdt tqc publish RUN_DIR" in summary.lines()[2]
     assert not (tmp_path / "runs").exists() or not list((tmp_path / "runs").glob("*.json"))
     _publish_fake_agent(agent, steps=100, success=0.5)  # another budget's agent: still waits
     store = RunStore(tmp_path / "runs")
@@ -709,7 +712,7 @@ def test_runs_wait_for_their_published_agent(tmp_path, monkeypatch):
     _publish_fake_agent(agent, steps=120, success=0.9)
     planned = plan(profile, store)[0]
     assert {p.state for p in planned} == {"missing"}
-    assert {p.entry.spec.data.expert_digest for p in planned} != {"pending"}
+    assert "pending" not in {p.entry.spec.data.expert_digest for p in planned}
     (row,) = agent_rows(profile, tmp_path / "experts")
     cell = table1(pd.DataFrame([row])).iloc[0]
     assert (cell["method"], cell["success_mean"], cell["seeds"]) == ("tqc", 90.0, 1)

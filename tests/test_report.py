@@ -182,6 +182,33 @@ def test_directions_across_profiles_set_each_profiles_answer_side_by_side(runs, 
     assert text.splitlines()[-1].startswith(last)
 
 
+@pytest.mark.parametrize(("longer", "within"), [(0.53, True), (0.9, False)])
+def test_budget_check_sets_the_longer_run_against_the_budget_runs_interval(
+    tmp_path, longer, within
+):
+    from gcdt.report import budget
+
+    push = Scope(tasks=("push",), rewards=("sparse",))
+    profile = dataclasses.replace(
+        PROFILE, table1=push, table1_tqc=Scope(tasks=()), rq4=push, rq5=push, ablation=push,
+        budget=push, budget_factor=4,
+    )  # fmt: skip
+    store = RunStore(tmp_path)
+    for entry in build_grid(profile):
+        success = longer if entry.sections == ("budget",) else 0.5
+        _write_result(store, entry.spec, {"success_rate": success, "mean_return": -9.0,
+                                          "episodes": 200})  # fmt: skip
+    (row,) = budget.budget_table(tables.load_runs(profile, tmp_path)).itertuples()
+    assert (row.task, row.seed, row.steps, row.longer_steps) == ("push", 0, 10, 40)
+    assert row.success == 50.0 and row.longer_success == pytest.approx(100 * longer)
+    low, high = tables.wilson_ci(0.5, 200)
+    assert (row.success_ci_low, row.success_ci_high) == pytest.approx((100 * low, 100 * high))
+    assert row.within is within and row.change == pytest.approx(100 * longer - 50)
+    assert ("| yes |" if within else "| **no** |") in budget.budget_markdown(
+        budget.budget_table(tables.load_runs(profile, tmp_path))
+    )
+
+
 def test_directions_check_the_papers_floor_at_a_quarter_of_expert_data(tmp_path):
     profile = dataclasses.replace(PROFILE, rq5_ratios=(0.0, 0.25, 1.0))
     store = RunStore(tmp_path)
@@ -306,7 +333,8 @@ def test_return_target_study_picks_on_validation_and_scores_on_test(tmp_path):
 def test_online_offline_figure_sets_agents_curves_beside_offline_runs(runs, tmp_path):
     agent = tmp_path / "tqc_push_sparse"
     agent.mkdir()
-    (agent / "run.json").write_text(json.dumps({"task": "push", "reward": "sparse", "seed": 0}))
+    record = {"task": "push", "reward": "sparse", "seed": 0, "env_steps": 3000}
+    (agent / "run.json").write_text(json.dumps(record))
     (agent / "eval.csv").write_text(
         "env_steps,train_seconds,wall_seconds,success_rate,mean_return,episodes\n"
         "25000,1.0,1.0,0.2,-40.0,100\n50000,2.0,2.0,0.9,-9.5,100\n"
@@ -405,3 +433,17 @@ def test_agents_table_puts_each_published_agent_beside_the_papers_tqc_cell(tmp_p
     written = pd.read_csv(csv).set_index(["task", "reward"])
     assert written.loc[("push", "sparse"), "success"] == 90.0
     assert written.loc[("reach", "dense"), "status"] == "not yet published"
+
+
+def test_a_damaged_agent_record_is_refused_in_one_line(tmp_path):
+    from gcdt.baselines.publish import read_agent
+
+    agent = tmp_path / "tqc_push_sparse"
+    agent.mkdir()
+    assert read_agent(agent) is None  # nothing published there
+    (agent / "run.json").write_text('{"task": "push"')
+    with pytest.raises(GcdtError, match=r"run.json is not a readable agent record .*publish"):
+        read_agent(agent)
+    (agent / "run.json").write_text('{"task": "push", "reward": "sparse"}')
+    with pytest.raises(GcdtError, match="run.json lacks seed, env_steps: publish it again"):
+        read_agent(agent)

@@ -56,6 +56,26 @@ class PublishConfig:
         check_minimums(self)
 
 
+#: What every reader of a published agent's run.json relies on.
+AGENT_FIELDS = ("task", "reward", "seed", "env_steps")
+
+
+def read_agent(folder: str | Path) -> dict[str, Any] | None:
+    """The run.json of the agent published in `folder` (None where there is none); a file
+    that cannot be read, or lacks what readers rely on, is refused in one line."""
+    path = Path(folder) / RUN_JSON
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_text())
+        missing = [k for k in AGENT_FIELDS if k not in record]
+    except (OSError, ValueError, TypeError) as err:
+        raise GcdtError(f"{path} is not a readable agent record ({err}): publish it again") from err
+    if missing:
+        raise GcdtError(f"{path} lacks {', '.join(missing)}: publish it again (gcdt tqc publish)")
+    return record
+
+
 def agent_dir(task: str, reward: str, root: str | Path = AGENTS_DIR) -> Path:
     """Where the agent of `task` with `reward` is published."""
     return Path(root) / f"tqc_{task}_{reward}"

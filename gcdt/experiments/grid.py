@@ -25,6 +25,7 @@ from gcdt.errors import GcdtError
 from gcdt.experiments.profiles import EVAL_SEED_STEP, SECTION_ORDER, Profile, target_seeds
 from gcdt.methods import OFFLINE_METHODS
 from gcdt.paths import REPO_ROOT
+from gcdt.policies import TQC_PREFIX
 
 if TYPE_CHECKING:
     from gcdt.training import TrainConfig
@@ -136,7 +137,7 @@ class DataSpec:
     def waits_for(self) -> str | None:
         """The published agent this data waits for, or None when it can be made."""
         if self.expert_digest == PENDING:
-            return self.expert.removeprefix("tqc:")
+            return self.expert.removeprefix(TQC_PREFIX)
         return None
 
     def base(self, kind: str) -> DataSpec:
@@ -329,10 +330,10 @@ def data_spec(
 
 def agent_steps(agent: Path) -> int | None:
     """The online steps the published agent in folder `agent` trained for (None: none there)."""
-    from gcdt.baselines.tqc_her import RUN_JSON
+    from gcdt.baselines.publish import read_agent
 
-    record = agent / RUN_JSON
-    return json.loads(record.read_text())["env_steps"] if record.is_file() else None
+    record = read_agent(agent)
+    return None if record is None else record["env_steps"]
 
 
 def file_digest(path: Path) -> str:

@@ -1,8 +1,9 @@
 """Scale profiles: every number that sets the size of the experiment grid, in one place.
 
-`paper` is the paper's protocol (`gcdt.paper`); `standard` a real, reduced reproduction on a
-2-core CPU: Table 1, Fig. 3 and Fig. 4 on every task, and the return-target and
-goal-generalisation studies; `quick` is standard's Table 1 at a quarter of its data, in one
+`paper` is the paper's protocol (`gcdt.paper`); `large` its data and evaluation on a 2-core CPU,
+with a fixed offline budget and TQC+HER from the published agents; `standard` a real, reduced
+reproduction on a 2-core CPU: Table 1, Fig. 3 and Fig. 4 on every task, and the return-target
+and goal-generalisation studies; `quick` is standard's Table 1 at a quarter of its data, in one
 sitting; `smoke` runs every stage in minutes and its numbers mean nothing. What each took is
 measured, not written here: `gcdt sweep --dry-run` estimates it from the published runs, and
 results/PROFILE/reproduce.json records a `make reproduce`.
@@ -187,6 +188,12 @@ class Profile:
                 f"profile {self.name!r}: section_order must order every section once "
                 f"({', '.join(SECTION_ORDER)}), got {self.section_order!r}"
             )
+        if self.tqc_agents and self.table1_tqc.tasks:
+            raise GcdtError(
+                f"profile {self.name!r}: Table 1's TQC+HER cells come from the published agents "
+                "(tqc_agents) or from grid runs (table1_tqc), not both: set table1_tqc to "
+                "Scope(tasks=())"
+            )
         if self.budget.tasks and (self.train_steps is None or self.budget_factor < 2):
             raise GcdtError(
                 f"profile {self.name!r}: the budget check needs fixed train_steps and a "
@@ -292,26 +299,28 @@ LARGE = dataclasses.replace(
     PAPER,
     name="large",
     description="the paper's data and evaluation on a 2-core CPU: Table 1 on every task and "
-    "reward, Fig. 4 and Fig. 3 with sparse rewards, on 1M-transition data from converged "
+    "reward, Fig. 4 and Fig. 3 with sparse rewards, on 1M-transition data from 1M-step "
     "TQC+HER experts; offline training for a fixed budget, checked against one 4 times longer; "
     "TQC+HER from the published 1M-step agents",
-    # The experts: issue 42's agents, 1M online steps each (results/experts/). Runs whose
-    # agent is not published yet wait for it.
+    # The experts: the published agents of 1M online steps (results/experts/, trained by
+    # scripts/long_tqc_runs.sh). Runs whose agent is not published yet wait for it.
     expert_agents={task: f"results/experts/tqc_{task}_sparse/model.zip" for task in PAPER_TASKS},
     agent_steps=paper.DATASET_SIZE,
     # Table 1's TQC+HER cells are those agents' (and the dense ones') held-out evaluations:
-    # 1M-step runs cost hours each on 2 cores, so one seed, the `cpu` config they trained with.
+    # one seed each (a 1M-step run is the longest job of the bundle: its run.json records its
+    # core-hours), with the `cpu` config they trained with.
     tqc_agents=True,
     tqc_config="cpu",
     table1_tqc=Scope(tasks=()),
-    # The paper's 120 epochs over 1M transitions are hours per run here: a fixed budget at the
-    # rate that learns in a budget this size (results/quick_checks/README.md), justified by the
+    # The paper's 120 epochs over 1M transitions cost what `gcdt sweep --profile paper
+    # --dry-run` estimates per run: a fixed budget instead, at the rate that learns in a budget
+    # this size (results/quick_checks/README.md), justified by the
     # budget check below (GC-DT trained 4 times longer), the same rule for BC ("samples").
     train_steps={"reach": 2_000, "push": 10_000, "pick_and_place": 10_000},
     learning_rate=1e-3,
     eval_envs=4,
     budget=Scope(tasks=("push", "pick_and_place"), rewards=("sparse",)),
-    # In the issue's priority: Table 1, the budget check, RQ5's disputed shares (25 % and 50 %
+    # What matters most first: Table 1, the budget check, RQ5's disputed shares (25 % and 50 %
     # first, then the 0 % end its direction check needs and 75 %), then RQ4.
     section_order=("table1", "budget", "rq5", "rq4", "ablation", "targets", "generalisation"),
     rq5_ratios=(0.25, 0.5, 0.0, 0.75, 1.0),
@@ -413,8 +422,9 @@ def deviations(profile: Profile) -> list[str]:
     if p.tqc_agents:
         out.append(
             "Table 1's TQC+HER cells from the published agents of "
-            f"{p.agent_steps or p.dataset_size:,} online steps (one seed each, "
-            "results/experts/) instead of runs of the grid with 3 seeds"
+            + (f"{p.agent_steps:,} online steps" if p.agent_steps else "any budget")
+            + f" (one seed each, results/experts/) instead of runs of the grid with "
+            f"{len(ref.seeds)} seeds"
         )
     if p.budget.tasks:
         out.append(

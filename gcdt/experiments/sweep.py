@@ -80,9 +80,15 @@ class SweepSummary:
         )
 
     def waiting_lines(self) -> list[str]:
-        """One line per published agent that runs wait for, with how many."""
+        """One line per published agent that runs wait for, with how many, and what to do."""
         agents = Counter(p.problem for p in self.planned if p.key in self.waiting)
-        return [f"waiting: {n} runs for {agent}" for agent, n in agents.items()]
+        lines = [f"waiting: {n} runs for {agent}" for agent, n in agents.items()]
+        if lines:
+            lines.append(
+                "publish each finished agent with `gcdt tqc publish RUN_DIR` (or fix the "
+                "profile's expert_agents path), then run this sweep again"
+            )
+        return lines
 
     def lines(self) -> list[str]:
         """`line()`, then each failed run with its error and the command that re-runs them."""
@@ -164,13 +170,15 @@ def shared_cost(todo: list[PlannedRun], costs: CostModel | None = None) -> float
     return seconds
 
 
-def section_costs(todo: list[PlannedRun]) -> dict[str, tuple[int, float]]:
-    """Runs and estimated seconds of `todo` per section, each run counted in the first of its
-    sections in the sweep's order (Table 1's GC-DT is also RQ4's and RQ5's full-data point)."""
-    out: dict[str, tuple[int, float]] = {}
+def section_costs(todo: list[PlannedRun]) -> dict[str, tuple[int, int, float]]:
+    """Runs, waiting runs and estimated seconds of `todo` per section, each run counted in the
+    first of its sections in the sweep's order (Table 1's GC-DT is also RQ4's and RQ5's
+    full-data point)."""
+    out: dict[str, tuple[int, int, float]] = {}
     for p in todo:
-        runs, seconds = out.get(p.entry.sections[0], (0, 0.0))
-        out[p.entry.sections[0]] = (runs + 1, seconds + p.estimate_seconds)
+        runs, waiting, seconds = out.get(p.entry.sections[0], (0, 0, 0.0))
+        waits = int(p.state == "waiting")
+        out[p.entry.sections[0]] = (runs + 1, waiting + waits, seconds + p.estimate_seconds)
     return out
 
 

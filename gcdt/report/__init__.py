@@ -11,7 +11,8 @@ One module per purpose:
   `write_agents_table()` (part of `write_report`) writes results/experts/table1_tqc.{md,csv}
   there from the published TQC+HER agents.
 - `gcdt.report.tables`, `figures`, `targets` (the return-target study) and `generalisation`
-  (the goal-generalisation study): what those files hold, computed from the run results;
+  (the goal-generalisation study), `budget` (a fixed offline budget against a longer one): what
+  those files hold, computed from the run results;
   `agents`: Table 1's TQC+HER cells from the published agents.
 - `gcdt.report.readme`: the README's results section (`gcdt report --readme`) and
   results/<profile>/reproduce.json, the wall time `make reproduce` measured.
@@ -24,7 +25,7 @@ The names below are importable from `gcdt.report` itself.
 
 from __future__ import annotations
 
-from gcdt.report import agents, figures, generalisation, tables, targets
+from gcdt.report import agents, budget, figures, generalisation, tables, targets
 from gcdt.report.notebook import (
     check_parameters,
     notebook_figures_dir,
@@ -38,6 +39,7 @@ from gcdt.report.readme import readme_block, record_reproduction, update_readme,
 
 __all__ = [
     "agents",
+    "budget",
     "check_parameters",
     "figures",
     "generalisation",

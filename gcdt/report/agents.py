@@ -12,13 +12,12 @@ agent is a "not yet published" row, and an agent published without a held-out me
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from gcdt.baselines.publish import AGENTS_DIR, HELD_OUT_SEED
+from gcdt.baselines.publish import AGENTS_DIR, HELD_OUT_SEED, read_agent
 from gcdt.baselines.tqc_her import RUN_JSON, load_tqc_config
 from gcdt.report.tables import PAPER_TABLE1, TASK_NAMES, aggregate, load_agent_curves
 
@@ -51,7 +50,7 @@ def load_agents(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:
     rows = []
     measurement = ("success_rate", "mean_return", "std_return", "episodes")
     for path in sorted(Path(agents_dir).glob(f"tqc_*/{RUN_JSON}")):
-        record = json.loads(path.read_text())
+        record = read_agent(path.parent)
         held_out = record.get("published", {}).get("held_out", {})
         rows.append(
             {

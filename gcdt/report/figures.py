@@ -22,6 +22,7 @@ from matplotlib.ticker import NullFormatter
 
 from gcdt.paths import figures_dir, write_if_changed
 from gcdt.report.tables import (
+    AGENT_KEY,
     METHOD_NAMES,
     TASK_NAMES,
     aggregate,
@@ -249,7 +250,7 @@ def online_offline_figure(
         & runs["sections"].apply(lambda s: "table1" in s or "rq4" in s)
     ]
     # The grid's TQC+HER runs; a profile's published-agent cells are among `agents` already.
-    online = runs[(runs["method"] == "tqc") & ~runs["key"].str.startswith("agent:")]
+    online = runs[(runs["method"] == "tqc") & ~runs["key"].str.startswith(AGENT_KEY)]
     tasks = [t for t in TASK_NAMES if t in set(offline["task"]) | set(agents["task"])]
     if not tasks:
         return None

@@ -78,7 +78,7 @@ def run_grid(profile: Profile, backend: str, methods: tuple[str, ...] | None = N
         )
         return
     summary = sweep(profile, backend=backend, methods=methods, progress=False)
-    print(summary.line())
+    print("\n".join(summary.lines()))
     if not summary.ok:
         raise GcdtError(
             f"{summary.line()}: see the failed result files in {results_dir(profile.name)}/runs"

@@ -9,7 +9,7 @@ import pandas as pd
 from gcdt.baselines.publish import AGENTS_DIR
 from gcdt.experiments.profiles import Profile, deviations_text
 from gcdt.paths import REPO_ROOT, outputs_root, results_dir, write_if_changed
-from gcdt.report import agents, figures, generalisation, tables, targets
+from gcdt.report import agents, budget, figures, generalisation, tables, targets
 from gcdt.report.readme import wall_time_text
 
 #: Table 1's TQC+HER cells from the published agents, beside them (`gcdt.report.agents`).
@@ -42,6 +42,10 @@ def write_tables(profile: Profile, runs) -> list[Path]:
         best = targets.best_targets(runs)
         files["return_target.csv"], files["best_target.csv"] = _csv(study), _csv(best)
         files["best_target.md"] = targets.best_targets_markdown(best) + "\n"
+    checks = budget.budget_table(runs)
+    if not checks.empty:  # the fixed offline budget against a longer one
+        files["budget_check.csv"] = _csv(checks)
+        files["budget_check.md"] = budget.budget_markdown(checks) + "\n"
     regions = generalisation.generalisation_table(runs)
     if not regions.empty:  # the goal-generalisation study
         files["generalisation.csv"] = _csv(regions)

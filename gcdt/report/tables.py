@@ -8,7 +8,6 @@ laid out like the paper's table: rewards as blocks, methods as rows, tasks as co
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,7 +15,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from gcdt.baselines.publish import AGENTS_DIR, agent_dir
+from gcdt import paper
+from gcdt.baselines.publish import AGENTS_DIR, agent_dir, read_agent
 from gcdt.baselines.tqc_her import EVAL_CSV, RUN_JSON
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
@@ -47,10 +47,18 @@ PAPER_TABLE1 = {
 BOOTSTRAP_SAMPLES = 10_000
 
 
-def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFrame:
+#: The key of a published agent's row in `load_runs`: a Table 1 cell, not a run of the grid.
+AGENT_KEY = "agent:"
+
+
+def load_runs(
+    profile: Profile, runs_dir: str | Path | None = None, agents: bool = True
+) -> pd.DataFrame:
     """One row per finished run of `profile`'s grid: its spec, sections, metrics, and what its
     training recorded (`training`: curves, dataset summary, model config). `runs_dir` defaults
-    to `results/<profile>/runs/` under `gcdt.paths.outputs_root()`."""
+    to `results/<profile>/runs/` under `gcdt.paths.outputs_root()`. With `agents`, a profile
+    with `tqc_agents` also gets its published agents' rows (`agent_rows`, keys starting
+    `AGENT_KEY`); a profile with no finished grid run is refused either way."""
     store = RunStore(Path(runs_dir) if runs_dir else results_dir(profile.name) / "runs")
     rows = []
     for entry in build_grid(profile):
@@ -67,6 +75,7 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
                 "task": spec.task,
                 "reward": spec.reward,
                 "seed": spec.seed,
+                "train_steps": spec.train_steps,
                 "size": spec.data.size if spec.data else None,
                 "expert_ratio": spec.data.expert_ratio if spec.data else None,
                 "target_return": spec.target_return,
@@ -81,8 +90,6 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
                 "execution": result.get("execution", {}),  # when, where, how long
             }
         )
-    if profile.tqc_agents:
-        rows += agent_rows(profile)
     if not rows:
         others = len(list(store.root.glob("*.json"))) if store.root.is_dir() else 0
         earlier = f" (its {others} result files are of an earlier grid)" if others else ""
@@ -90,6 +97,8 @@ def load_runs(profile: Profile, runs_dir: str | Path | None = None) -> pd.DataFr
             f"no finished runs of profile {profile.name!r} in {store.root}{earlier}: run "
             f"`gcdt sweep --profile {profile.name}` (or `make reproduce PROFILE={profile.name}`)"
         )
+    if agents and profile.tqc_agents:
+        rows += agent_rows(profile)
     return pd.DataFrame(rows)
 
 
@@ -101,23 +110,24 @@ def agent_rows(profile: Profile, agents_dir: str | Path = AGENTS_DIR) -> list[di
     rows = []
     for task in profile.table1.tasks:
         for reward in profile.table1.rewards:
-            path = agent_dir(task, reward, agents_dir) / RUN_JSON
-            record = json.loads(path.read_text()) if path.is_file() else {}
+            folder = agent_dir(task, reward, agents_dir)
+            record = read_agent(folder) or {}
             steps = profile.agent_steps
             if "published" not in record or (steps is not None and record["env_steps"] != steps):
                 continue
             held_out = record["published"]["held_out"]
             rows.append(
                 {
-                    "key": f"agent:{path.parent.name}",
+                    "key": f"{AGENT_KEY}{folder.name}",
                     "sections": ("table1",),
                     "method": "tqc",
                     "task": task,
                     "reward": reward,
                     "seed": record["seed"],
+                    "train_steps": None,
                     "size": None,
                     "expert_ratio": None,
-                    "target_return": 0.0,
+                    "target_return": paper.TARGET_RETURN,
                     "eval_region": None,
                     "train_region": None,
                     "success_rate": held_out["success_rate"],
@@ -126,7 +136,7 @@ def agent_rows(profile: Profile, agents_dir: str | Path = AGENTS_DIR) -> list[di
                     "std_return": held_out["std_return"],
                     "evaluations": [held_out],
                     "training": {"curve": record["curve"], "env_steps": record["env_steps"]},
-                    "execution": {"agent": path.parent.name},
+                    "execution": {"agent": folder.name},
                 }
             )
     return rows
@@ -138,7 +148,7 @@ def load_agent_curves(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:
     each agent's `run.json` (what it is) and `eval.csv` (its held-out curve)."""
     frames = []
     for run in sorted(Path(agents_dir).glob(f"tqc_*/{RUN_JSON}")):
-        record = json.loads(run.read_text())
+        record = read_agent(run.parent)
         curve = pd.read_csv(run.parent / EVAL_CSV)
         frames.append(
             curve.assign(
@@ -207,8 +217,16 @@ def _interval(group: pd.DataFrame, metric: str, scale: float) -> tuple[float, fl
     return low * scale, high * scale
 
 
+#: What `aggregate` gives per group, beside the group's keys.
+_STATS = ("mean", "std", "ci_low", "ci_high")
+AGGREGATES = (*(f"{m}_{s}" for m in ("return", "success") for s in _STATS), "seeds")
+
+
 def aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
-    """Per group of `by`: mean, std and 95 % interval of return and success (%), and seeds."""
+    """Per group of `by`: mean, std and 95 % interval of return and success (%), and seeds
+    (no rows, with those columns, when `runs` has none)."""
+    if runs.empty:
+        return pd.DataFrame(columns=[*by, *AGGREGATES])
     rows = []
     for keys, group in runs.groupby(by, sort=False):
         row = dict(zip(by, keys, strict=True))
@@ -506,9 +524,11 @@ def directions_across(profiles: list[Profile]) -> pd.DataFrame:
     tables = {}
     for profile in profiles:
         try:
-            tables[profile.name] = directions(load_runs(profile)).set_index("comparison")
+            table = directions(load_runs(profile))
         except GcdtError:
             continue  # nothing published for this profile yet
+        if not table.empty:  # runs, but none of the comparisons (a section alone)
+            tables[profile.name] = table.set_index("comparison")
     rows: dict[str, dict] = {}
     for name, table in tables.items():
         for comparison, row in table.iterrows():
@@ -521,6 +541,8 @@ def directions_across_markdown(profiles: list[Profile]) -> str:
     """`directions_across` as Markdown, a disagreement in bold, and each profile's count."""
     table = directions_across(profiles)
     names = list(table.columns[2:])
+    if not names:
+        return "*No profile has published the runs these comparisons need.*"
     lines = [
         "| comparison | paper | " + " | ".join(f"`{n}`" for n in names) + " |",
         "|---|---|" + "---|" * len(names),

@@ -1,0 +1,68 @@
+"""The budget check: does a fixed offline budget stop short of what longer training reaches?
+
+A profile that trains for a fixed number of gradient steps instead of the paper's epochs
+(`Profile.train_steps`) justifies it with its `budget` section: GC-DT on the first seed,
+trained `Profile.budget_factor` times longer, beside Table 1's run of the same task, reward
+and seed. The budget holds when the longer run's success lies within the 95 % interval of
+the budget run's evaluation.
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from gcdt.report.tables import TASK_NAMES, aggregate
+
+
+def budget_table(runs: pd.DataFrame) -> pd.DataFrame:
+    """Per task, reward and seed of the check: the budget run's and the longer run's steps and
+    success with its 95 % interval, the change, and whether the longer run's success lies
+    within the budget run's interval (empty without a budget section)."""
+    longer = runs[runs["sections"].apply(lambda s: "budget" in s)]
+    rows = []
+    for r in longer.itertuples():
+        base = runs[
+            runs["sections"].apply(lambda s: "table1" in s)
+            & (runs["method"] == r.method)
+            & (runs["task"] == r.task)
+            & (runs["reward"] == r.reward)
+            & (runs["seed"] == r.seed)
+        ]
+        if base.empty:
+            continue  # Table 1's run is not done yet
+        b, x = aggregate(base, ["task"]).iloc[0], aggregate(longer.loc[[r.Index]], ["task"]).iloc[0]
+        rows.append(
+            {
+                "task": r.task,
+                "reward": r.reward,
+                "seed": r.seed,
+                "steps": int(base["train_steps"].iloc[0]),
+                "success": b["success_mean"],
+                "success_ci_low": b["success_ci_low"],
+                "success_ci_high": b["success_ci_high"],
+                "longer_steps": int(r.train_steps),
+                "longer_success": x["success_mean"],
+                "longer_ci_low": x["success_ci_low"],
+                "longer_ci_high": x["success_ci_high"],
+                "change": x["success_mean"] - b["success_mean"],
+                "within": bool(b["success_ci_low"] <= x["success_mean"] <= b["success_ci_high"]),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def budget_markdown(table: pd.DataFrame) -> str:
+    """`budget_table` as Markdown: one row per check."""
+    lines = [
+        "| task | reward | seed | steps | success % [95 %] | longer: steps | success % [95 %] "
+        "| change (pts) | within the budget run's interval |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in table.itertuples():
+        lines.append(
+            f"| {TASK_NAMES[r.task]} | {r.reward} | {r.seed} | {r.steps:,} | {r.success:.1f} "
+            f"[{r.success_ci_low:.1f}, {r.success_ci_high:.1f}] | {r.longer_steps:,} | "
+            f"{r.longer_success:.1f} [{r.longer_ci_low:.1f}, {r.longer_ci_high:.1f}] | "
+            f"{r.change:+.1f} | {'yes' if r.within else '**no**'} |"
+        )
+    return "\n".join(lines)

@@ -281,7 +281,8 @@ class Collect(_WritesDataset, _Progress):
     """collect an offline dataset with a policy
 
     Run a policy on parallel envs and save its first whole episodes that add up to at least N
-    transitions (both reward types are stored)."""
+    transitions (both reward types are stored). The collection keeps its finished chunks in
+    PATH.chunks/ until PATH is written: run the same command again after a kill to resume it."""
 
     name = "collect"
     agent: PolicyOptions
@@ -301,6 +302,7 @@ class Collect(_WritesDataset, _Progress):
 
     def run(self, command: str) -> int:
         from gcdt.data import collect
+        from gcdt.data.collect import chunks_beside, remove_chunks
 
         check_writable(self.out)  # before the collection, not after it
         policy = self.agent.make()
@@ -315,9 +317,12 @@ class Collect(_WritesDataset, _Progress):
             labels=self.labels,
             goal_region=self.goal_region,
             progress=not self.no_progress,
+            chunks_dir=chunks_beside(self.out),
         )
         dataset = dataset.with_metadata(command=command)
-        _report(dataset, dataset.save(self.out), self.json)
+        saved = dataset.save(self.out)
+        remove_chunks(chunks_beside(self.out))
+        _report(dataset, saved, self.json)
         return 0
 
 

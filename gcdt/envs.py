@@ -225,6 +225,18 @@ def episode_seed(seed: int, index: int, stream: str = "evaluation") -> int:
     return int(sequence.generate_state(1, np.uint64)[0] >> np.uint64(1))
 
 
+def policy_seed(seed: int, first_episode: int, stream: str = "evaluation") -> int:
+    """The seed of a policy's own randomness (noise, random actions) in a run of `seed` that
+    starts at episode `first_episode`: `seed` itself for a run from episode 0, as always, and
+    otherwise one drawn for that start (a spawn key of its own, unlike any episode seed's), so
+    that a run started later does not replay the draws of the run from episode 0."""
+    if first_episode == 0:
+        return int(seed)
+    key = (0, SEED_STREAMS[stream], int(first_episode))  # stream ids start at 1: no clash
+    sequence = np.random.SeedSequence(seed, spawn_key=key)
+    return int(sequence.generate_state(1, np.uint64)[0] >> np.uint64(1))
+
+
 class SeededResets(gym.Wrapper):
     """Resets its `j`-th episode with `episode_seed(seed, offset + j * stride, stream)`,
     whatever seed the caller passes.

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from gcdt.envs import check_reward, episode_seed, get_task, make_env, make_vec_env
+from gcdt.envs import check_reward, episode_seed, get_task, make_env, make_vec_env, policy_seed
 from gcdt.errors import GcdtError
 from gcdt.policies.base import Policy
 
@@ -50,6 +50,10 @@ class VectorRollout:
     `gcdt.envs`). `env_kwargs` go to each env's constructor (e.g. `render_width`); `in_process`
     steps the envs in this process rather than one process each (`make_vec_env`). `obs`, the
     observation the next step acts in, may be replaced after a change to the envs.
+
+    `first_episode` starts the run at that episode index, on fresh envs (a collection's later
+    chunk, `gcdt.data.collect`); the policy's own randomness is then seeded for that start
+    (`policy_seed`), so that it does not replay the noise of the run from episode 0.
     """
 
     def __init__(
@@ -64,6 +68,7 @@ class VectorRollout:
         on_step: Callable[[VectorStep], None] | None = None,
         stream: str = "evaluation",
         in_process: bool = False,
+        first_episode: int = 0,
     ) -> None:
         spec = get_task(task)
         check_reward(reward)
@@ -79,8 +84,11 @@ class VectorRollout:
             raise GcdtError(f"n_envs must be a positive integer, got {n_envs!r}")
         if not isinstance(seed, int | np.integer) or seed < 0:
             raise GcdtError(f"seed must be a non-negative integer, got {seed!r}")
+        if not isinstance(first_episode, int | np.integer) or first_episode < 0:
+            raise GcdtError(f"first_episode must be a non-negative integer, got {first_episode!r}")
         self.policy, self.task, self.reward = policy, spec.name, reward
         self.n_envs, self.seed, self.stream = int(n_envs), int(seed), stream
+        self.first_episode = int(first_episode)
         episode_seed(self.seed, 0, stream)  # an unknown stream fails here, before envs start
         self.env_kwargs, self.on_step = dict(env_kwargs or {}), on_step
         self.in_process = in_process
@@ -93,9 +101,9 @@ class VectorRollout:
             self.task, self.reward, self.n_envs, in_process=self.in_process, **self.env_kwargs
         )
         try:
-            self.policy.reset(self.n_envs, self.seed)
-            self.episode = np.arange(self.n_envs, dtype=np.int64)
-            self.next_episode = self.n_envs
+            self.policy.reset(self.n_envs, policy_seed(self.seed, self.first_episode, self.stream))
+            self.episode = self.first_episode + np.arange(self.n_envs, dtype=np.int64)
+            self.next_episode = self.first_episode + self.n_envs
             self.obs, _ = self.envs.reset(seed=[self.seed_of(j) for j in self.episode])
         except BaseException:
             self.envs.close()

@@ -34,9 +34,11 @@ def test_artifacts_made_on_one_node_are_fetched_from_the_storage_uri(tmp_path, m
         f"checkpoints/{spec.training_key()}/checkpoint.pt",
         f"datasets/{spec.data.key()}.npz",
     ]
+    # A collection's chunks stay on its node, and only until its dataset is saved.
+    assert not list((tmp_path / "node0").rglob("*.chunks"))
     # Another node, with its own empty folder, makes nothing: it downloads.
     monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "node1"))
-    monkeypatch.setattr(artifacts, "_collect", lambda spec: pytest.fail("collected again"))
+    monkeypatch.setattr(artifacts, "_collect", lambda *a: pytest.fail("collected again"))
     monkeypatch.setattr("gcdt.training.train", lambda *a, **k: pytest.fail("trained again"))
     fetched = artifacts.checkpoint(spec)
     assert fetched == tmp_path / "node1" / made.relative_to(tmp_path / "node0")

@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import hashlib
+import importlib
+
 import numpy as np
 import pytest
 
-from gcdt.data import collect
+from gcdt.cli import main
+from gcdt.data import collect, load_dataset
 from gcdt.envs import episode_seed, make_env
 from gcdt.errors import GcdtError
 from gcdt.policies import RandomPolicy, ScriptedExpert
+
+# The module, which `gcdt.data.collect` (its function, exported by gcdt.data) hides.
+collect_module = importlib.import_module("gcdt.data.collect")
+_COLLECT_CHUNK = collect_module._collect_chunk
 
 
 def _replay(ds, reward: str) -> dict[str, np.ndarray]:
@@ -103,3 +111,175 @@ def test_bad_collection_arguments():
         collect(RandomPolicy("reach"), "push", 10)
     with pytest.raises(GcdtError, match="n_envs must be a positive integer"):
         collect(RandomPolicy("reach"), "reach", 10, n_envs=0)
+
+
+# --- chunks: resumable collections ---------------------------------------------------------
+
+
+class Killed(Exception):
+    """Stands for the kill of a collecting process."""
+
+
+def _killed_after(monkeypatch, chunks: int) -> list[int]:
+    """Make collections die after collecting `chunks` chunks; returns the count of chunks
+    collected (not loaded) since."""
+    collected = []
+
+    def chunk(*args, **kwargs):
+        if len(collected) == chunks:
+            raise Killed
+        collected.append(1)
+        return _COLLECT_CHUNK(*args, **kwargs)
+
+    monkeypatch.setattr(collect_module, "_collect_chunk", chunk)
+    return collected
+
+
+def _digest(ds) -> str:
+    h = hashlib.sha256()
+    for k in sorted(ds.arrays):
+        a = np.ascontiguousarray(ds.arrays[k])
+        h.update(f"{k}:{a.dtype.str}:{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _push(**kwargs):
+    """Two Push envs with a noisy expert: Bullet's carried state and the policy's noise."""
+    expert = ScriptedExpert("push", noise_std=0.2)
+    return collect(expert, "push", 150, seed=0, n_envs=2, progress=False, **kwargs)
+
+
+def test_a_collection_of_one_chunk_is_the_collection_made_before_chunks(tmp_path):
+    # The arrays the collector made before collections ran in chunks, for these arguments;
+    # the smoke, quick and standard datasets (and their manifests' SHA-256s) are such
+    # one-chunk collections.
+    reference = "db65c465081c380dfd9bb35b2834a90b965f2930c12a3be2fe1bf2993b2f2c99"
+    assert 150 < collect_module.CHUNK_TRANSITIONS
+    plain = _push()
+    assert _digest(plain) == reference
+    saved = _push(chunks_dir=tmp_path / "chunks")  # saved as a chunk, and the same
+    assert _digest(saved) == reference
+    assert [p.name for p in (tmp_path / "chunks").iterdir()] == ["00000.npz"]
+    for ds in (plain, saved):  # and so is the metadata: no chunk keys
+        assert not {"chunks", "chunk_transitions", "chunks_resumed"} & set(ds.metadata)
+
+
+def test_a_killed_collection_resumes_from_its_chunks_and_equals_an_uninterrupted_one(
+    tmp_path, monkeypatch
+):
+    monkeypatch.setattr(collect_module, "CHUNK_TRANSITIONS", 40)
+    whole = _push()
+    chunks = whole.metadata["chunks"]
+    assert chunks >= 3 and whole.metadata["chunk_transitions"] == 40
+    assert "chunks_resumed" not in whole.metadata
+
+    folder = tmp_path / "push.chunks"
+    _killed_after(monkeypatch, 2)
+    with pytest.raises(Killed):
+        _push(chunks_dir=folder)
+    assert sorted(p.name for p in folder.iterdir()) == ["00000.npz", "00001.npz"]
+    collected = _killed_after(monkeypatch, 99)
+    resumed = _push(chunks_dir=folder)
+    assert len(collected) == chunks - 2  # those left; the two saved ones were loaded
+    assert resumed.equal_data(whole)
+    assert resumed.metadata["chunks"] == chunks and resumed.metadata["chunks_resumed"] == 2
+
+    # Chunked or not, the run's episodes are the same instances in the same order, and the
+    # first chunk is the first episodes of the one-chunk run; later chunks restart fresh
+    # envs (and the noise), so they differ from it.
+    monkeypatch.setattr(collect_module, "CHUNK_TRANSITIONS", 10_000)
+    plain = _push()
+    assert "chunks" not in plain.metadata
+    n = min(plain.n_episodes, whole.n_episodes)
+    np.testing.assert_array_equal(
+        whole.arrays["episode_seed"][:n], plain.arrays["episode_seed"][:n]
+    )
+    first = load_dataset(folder / "00000.npz")
+    assert plain.select(np.arange(first.n_episodes), {}).equal_data(first)
+    assert len(first) >= 40 and len(first) - first.episode_lengths[-1] < 40
+    assert not plain.select(np.arange(n), {}).equal_data(whole.select(np.arange(n), {}))
+
+
+def test_later_chunks_do_not_replay_the_policys_noise(monkeypatch):
+    monkeypatch.setattr(collect_module, "CHUNK_TRANSITIONS", 50)
+    ds = collect(RandomPolicy("reach"), "reach", 150, seed=0, progress=False)
+    assert ds.metadata["chunks"] >= 2
+    starts = ds.actions[ds.offsets[:-1]]
+    assert len({tuple(a) for a in starts}) == len(starts)
+
+
+def test_a_bad_chunk_is_refused_and_kept(tmp_path, monkeypatch):
+    monkeypatch.setattr(collect_module, "CHUNK_TRANSITIONS", 40)
+    folder = tmp_path / "push.chunks"
+    _killed_after(monkeypatch, 2)
+    with pytest.raises(Killed):
+        _push(chunks_dir=folder)
+    bad = folder / "00001.npz"
+    blob = bad.read_bytes()
+    bad.write_bytes(blob[: len(blob) // 2])  # a disk that lost the end of the file
+    with pytest.raises(GcdtError) as err:
+        _push(chunks_dir=folder)
+    message = str(err.value)
+    assert "\n" not in message and message.startswith(f"{bad} is not a gcdt dataset")
+    assert "truncated or corrupt" in message and message.endswith(
+        f"delete {bad} to collect that chunk again"
+    )
+    assert bad.read_bytes() == blob[: len(blob) // 2]  # neither recollected nor removed
+
+    # A chunk of another collection (here: another seed) is refused too.
+    bad.write_bytes(blob)
+    with pytest.raises(
+        GcdtError, match=r"00000.npz is a chunk of another collection \(seed 0, not 1\): delete"
+    ):
+        collect(
+            ScriptedExpert("push", noise_std=0.2),
+            "push",
+            150,
+            seed=1,
+            n_envs=2,
+            progress=False,
+            chunks_dir=folder,
+        )
+
+
+def test_gcdt_collect_resumes_a_killed_collection(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(collect_module, "CHUNK_TRANSITIONS", 60)
+    out = tmp_path / "reach.npz"
+    argv = ["collect", "--policy", "random", "--task", "reach", "--transitions", "150"]
+    argv += ["--out", str(out), "--no-progress", "--seed", "2"]
+    _killed_after(monkeypatch, 1)
+    with pytest.raises(Killed):
+        main(argv)
+    assert not out.exists() and (tmp_path / "reach.chunks" / "00000.npz").is_file()
+    _killed_after(monkeypatch, 99)
+    assert main(argv) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["reach.npz"]  # chunks removed
+    made = load_dataset(out)
+    whole = collect(RandomPolicy("reach"), "reach", 150, seed=2, progress=False)
+    assert made.equal_data(whole)
+    assert (
+        made.metadata["chunks_resumed"] == 1
+        and made.metadata["chunks"] == whole.metadata["chunks"] >= 2
+    )
+
+
+def test_a_grid_collection_resumes_after_a_kill(tmp_path, monkeypatch):
+    from gcdt.experiments import artifacts, build_grid
+    from tests.test_experiments import TINY
+
+    monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path))
+    monkeypatch.setattr(collect_module, "CHUNK_TRANSITIONS", 100)
+    spec = next(e.spec for e in build_grid(TINY, only="table1") if e.spec.method == "gcdt")
+    base = spec.data.base("expert")
+    path = artifacts.grid_dir() / "datasets" / f"{base.key()}.npz"
+    _killed_after(monkeypatch, 1)
+    with pytest.raises(Killed):
+        artifacts.dataset(base)
+    assert not path.exists() and [p.name for p in path.with_suffix(".chunks").iterdir()] == [
+        "00000.npz"
+    ]
+    _killed_after(monkeypatch, 99)
+    made = artifacts.dataset(base)
+    assert made.metadata["chunks_resumed"] == 1 and made.metadata["chunks"] >= 3
+    assert load_dataset(path).equal_data(made) and not path.with_suffix(".chunks").exists()

@@ -2,12 +2,24 @@
 
 from __future__ import annotations
 
+import json
+import shutil
 import time
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm.auto import tqdm
 
-from gcdt.data.dataset import EPISODE_ARRAYS, TRANSITION_ARRAYS, Dataset, offsets_from_lengths
+from gcdt.data.dataset import (
+    EPISODE_ARRAYS,
+    TRANSITION_ARRAYS,
+    Dataset,
+    load_dataset,
+    offsets_from_lengths,
+)
+from gcdt.data.mixing import concatenate
 from gcdt.envs import OBS_KEYS, compute_rewards, env_id, get_task
 from gcdt.errors import GcdtError
 from gcdt.policies.base import Policy
@@ -18,6 +30,19 @@ from gcdt.rollout import VectorRollout
 
 #: What a collection records as each state's action (see `collect`).
 LABELS = ("executed", "clean")
+
+
+#: Transitions per chunk of a collection. A collection runs as chunks, each on fresh envs
+#: started at the episode after the previous chunk's last (PyBullet carries state from an
+#: env's earlier episodes into the next: only restarts at fixed points let a resumed
+#: collection equal an uninterrupted one), each keeping its first episodes that reach this
+#: many transitions, the last chunk the remainder. Counted in transitions, not episodes,
+#: because episodes last from one step to fifty: a collection of up to this many transitions
+#: (every one of the smoke, quick and standard profiles) is one chunk, one run of fresh envs
+#: from episode 0 as before chunks existed, bit for bit, while a million-transition
+#: collection of the large profile is twenty chunks, each a few minutes of stepping, so a
+#: kill loses at most that much.
+CHUNK_TRANSITIONS = 50_000
 
 
 def collect(
@@ -31,14 +56,22 @@ def collect(
     labels: str = "executed",
     goal_region: GoalRegion | None = None,
     progress: bool = True,
+    chunks_dir: str | Path | None = None,
 ) -> Dataset:
     """Collect the first episodes of a seeded run whose lengths add up to >= `transitions`.
 
     The dataset holds episodes `0..k-1` of the run (each reset with `episode_seed(seed, j,
     stream)`, stream "random-collection" for the random policy and "collection" otherwise),
     with `k` the smallest count reaching `transitions`, so it exceeds the request by less than
-    one episode and is bit-for-bit the same for the same `seed` and `n_envs`. Episodes that
-    other envs had started when the last needed one finished are discarded.
+    one episode and is bit-for-bit the same for the same `seed` and `n_envs`. The run goes in
+    chunks of `CHUNK_TRANSITIONS` (see there); in each, the episodes that other envs had
+    started when the chunk's last needed one finished are discarded.
+
+    With `chunks_dir`, each chunk is saved there as `00000.npz`, `00001.npz`, ... once
+    collected, and chunks found there are loaded, not collected again: a collection killed
+    midway resumes, and gives the same dataset as one never interrupted. A chunk that cannot
+    be read, or that belongs to another collection, is refused. The caller removes the folder
+    once it has saved the dataset (`remove_chunks`).
 
     `reward` is only what the policy sees as its previous reward (for return-conditioned
     policies); the dataset stores both reward types, computed from the goals. `labels` is the
@@ -56,14 +89,37 @@ def collect(
     # another one: no collected episode replays another collection's or an evaluation's.
     stream = "random-collection" if policy.name == "random" else "collection"
     env_kwargs = None if goal_region is None else {"goal_region": goal_region}
-    rollout = VectorRollout(
-        policy, task, reward, n_envs, seed, stream=stream, env_kwargs=env_kwargs
-    )
 
-    running: list[dict[str, list[np.ndarray]]] = [_empty_episode() for _ in range(n_envs)]
-    finished: dict[int, dict[str, np.ndarray]] = {}
-    kept, kept_steps = 0, 0  # the complete prefix of episodes 0..kept-1 and its length
-    started = time.perf_counter()
+    def rollout(first_episode: int) -> VectorRollout:
+        return VectorRollout(
+            policy,
+            task,
+            reward,
+            n_envs,
+            seed,
+            stream=stream,
+            env_kwargs=env_kwargs,
+            first_episode=first_episode,
+        )
+
+    seed_of = rollout(0).seed_of  # checks the arguments before anything is loaded or run
+    identity = {  # what every chunk of this collection shares (JSON, as chunks store it)
+        "task": spec.name,
+        "policy": policy.config(),
+        "reward": reward,
+        "seed": int(seed),
+        "n_envs": int(n_envs),
+        "labels": labels,
+        "goal_region": None if goal_region is None else str(goal_region),
+        "transitions_requested": int(transitions),
+        "chunk_transitions": CHUNK_TRANSITIONS,
+        "versions": package_versions(),
+    }
+    identity = json.loads(json.dumps(identity))
+    folder = None if chunks_dir is None else Path(chunks_dir)
+
+    parts: list[Dataset] = []
+    resumed, steps = 0, 0
     bar = progress_bar(
         total=transitions,
         unit="step",
@@ -71,6 +127,61 @@ def collect(
         progress=progress,
         leave=False,
     )
+    while steps < transitions:
+        where = {
+            "chunk": len(parts),
+            "first_episode": sum(p.n_episodes for p in parts),
+            "transitions": min(CHUNK_TRANSITIONS, transitions - steps),
+        }
+        path = None if folder is None else folder / f"{len(parts):05d}.npz"
+        if path is not None and path.exists():
+            part = _resumed_chunk(path, {**identity, **where}, seed_of)
+            resumed += 1
+        else:
+            chunk = _collect_chunk(
+                rollout(where["first_episode"]), spec.name, where["transitions"], labels, bar
+            )
+            part = chunk.with_metadata(source="collect-chunk", **identity, **where)
+            if path is not None:
+                part.save(path)
+        parts.append(part)
+        steps += len(part)
+        bar.update(min(steps, transitions) - bar.n)
+    bar.close()
+
+    # One chunk is the collection as it was before chunks existed, and so is its metadata.
+    chunking = {"chunks": len(parts), "chunk_transitions": CHUNK_TRANSITIONS}
+    metadata = {
+        "source": "collect",
+        "task": spec.name,
+        "env_ids": {"sparse": env_id(task, "sparse"), "dense": env_id(task, "dense")},
+        "policy": policy.config(),
+        "seed": int(seed),
+        "n_envs": int(n_envs),
+        "labels": labels,
+        **({"goal_region": str(goal_region)} if goal_region is not None else {}),
+        "transitions_requested": int(transitions),
+        **(chunking if len(parts) > 1 else {}),
+        **({"chunks_resumed": resumed} if resumed else {}),
+        # The collecting time of every chunk, those of an interrupted earlier process included.
+        "seconds": round(sum(p.metadata["seconds"] for p in parts), 3),
+        "stepping_seconds": round(sum(p.metadata["stepping_seconds"] for p in parts), 3),
+        "created": utc_now(),
+        "versions": package_versions(),
+    }
+    return concatenate(parts, metadata)
+
+
+def _collect_chunk(
+    rollout: VectorRollout, task: str, transitions: int, labels: str, bar: tqdm
+) -> Dataset:
+    """The first episodes of `rollout` (from its first one) whose lengths reach `transitions`."""
+    n_envs, first = rollout.n_envs, rollout.first_episode
+    running: list[dict[str, list[np.ndarray]]] = [_empty_episode() for _ in range(n_envs)]
+    finished: dict[int, dict[str, np.ndarray]] = {}
+    kept, kept_steps = first, 0  # the complete prefix of episodes first..kept-1 and its length
+    done_before = bar.n
+    started = time.perf_counter()
     with rollout:
         while kept_steps < transitions:
             step = rollout.step()
@@ -86,32 +197,58 @@ def collect(
                 if step.done[i]:
                     j = int(step.episode[i])
                     final = {key: step.next_obs[key][i] for key in OBS_KEYS}
-                    finished[j] = _finish_episode(buf, final, rollout.seed_of(j), spec.name)
+                    finished[j] = _finish_episode(buf, final, rollout.seed_of(j), task)
                     running[i] = _empty_episode()
             while kept in finished and kept_steps < transitions:
                 kept_steps += len(finished[kept]["action"])
                 kept += 1
-            bar.update(min(kept_steps, transitions) - bar.n)
+            bar.update(done_before + min(kept_steps, transitions) - bar.n)
         stepping_seconds = time.perf_counter() - rollout.stepping_started
-    bar.close()
-
-    episodes = [finished[j] for j in range(kept)]
-    metadata = {
-        "source": "collect",
-        "task": spec.name,
-        "env_ids": {"sparse": env_id(task, "sparse"), "dense": env_id(task, "dense")},
-        "policy": policy.config(),
-        "seed": int(seed),
-        "n_envs": int(n_envs),
-        "labels": labels,
-        **({"goal_region": str(goal_region)} if goal_region is not None else {}),
-        "transitions_requested": int(transitions),
+    timing = {
         "seconds": round(time.perf_counter() - started, 3),
         "stepping_seconds": round(stepping_seconds, 3),
-        "created": utc_now(),
-        "versions": package_versions(),
     }
-    return from_episodes(spec.name, episodes, metadata)
+    return from_episodes(task, [finished[j] for j in range(first, kept)], timing)
+
+
+def _resumed_chunk(path: Path, expected: dict[str, Any], seed_of: Callable[[int], int]) -> Dataset:
+    """Chunk `path` of an earlier, interrupted run of this collection, checked to be one."""
+    fix = f"delete {path} to collect that chunk again"
+    try:
+        part = load_dataset(path)
+    except GcdtError as err:
+        raise GcdtError(f"{err}: {fix}") from None
+    meta = part.metadata
+    if meta.get("source") != "collect-chunk":
+        raise GcdtError(f"{path} is not a chunk of a collection: {fix}")
+    for key, value in expected.items():
+        if meta.get(key) != value:
+            raise GcdtError(
+                f"{path} is a chunk of another collection ({key} {meta.get(key)!r}, not "
+                f"{value!r}): delete {path.parent} to start this collection afresh"
+            )
+    lengths, target = part.episode_lengths, expected["transitions"]
+    first_seeds = part.arrays["episode_seed"][:1].tolist()
+    if (
+        lengths.sum() < target
+        or lengths.sum() - lengths[-1] >= target
+        or first_seeds != [seed_of(expected["first_episode"])]
+    ):
+        raise GcdtError(f"{path} does not hold the episodes its metadata names: {fix}")
+    return part
+
+
+def chunks_beside(path: str | Path) -> Path:
+    """The folder that keeps the chunks of a collection saved to `path` until it is saved:
+    `<name>.chunks` beside it."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.chunks")
+
+
+def remove_chunks(folder: str | Path) -> None:
+    """Remove a collection's chunk folder (`collect(chunks_dir=...)`), once its dataset is saved."""
+    if Path(folder).exists():
+        shutil.rmtree(folder)
 
 
 def _empty_episode() -> dict[str, list[np.ndarray]]:

@@ -7,8 +7,9 @@ Each artifact lives under `<artifacts>/grid/` at a path named by the hash of the
 makes it, so every run that needs the same dataset (or agent) uses one copy, made once. An
 exclusive file lock per artifact stops two workers (processes or Ray tasks on one machine, or
 nodes sharing the folder) from making it twice; each is written atomically, so a killed
-worker leaves no half artifact behind. The sparse and dense variants of a task share one
-collection (both rewards are stored).
+worker leaves no half artifact behind; a killed collection resumes from the chunks it saved
+(`gcdt.data.collect`). The sparse and dense variants of a task share one collection (both
+rewards are stored).
 
 Under a storage URI (`gcdt.experiments.storage`, a cluster without a shared filesystem) an
 artifact missing here is first looked for there, and one made here is uploaded there.
@@ -32,6 +33,7 @@ from gcdt.baselines.tqc_her import (
     train_tqc,
 )
 from gcdt.data import Dataset, collect, load_dataset, mix, subset
+from gcdt.data.collect import chunks_beside, remove_chunks
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import DataSpec, RunSpec, TQCSpec, file_digest
 from gcdt.experiments.storage import run_storage
@@ -105,11 +107,15 @@ def dataset(spec: DataSpec) -> Dataset:
     """Dataset `spec`, made (collected, or drawn from its collections) if it does not exist."""
     name = f"datasets/{spec.key()}.npz"
     path = grid_dir() / name
+    # A collection keeps its chunks beside the dataset until it is saved, so that a killed
+    # worker's successor resumes it; they stay on this machine (only the dataset is uploaded).
+    chunks = chunks_beside(path)
     with _locked(spec.key()):
         if path.exists() or _fetched([name]):
+            remove_chunks(chunks)  # left by a worker killed after the save, or made elsewhere
             return load_dataset(path)
         if spec.is_base:
-            made = _collect(spec)
+            made = _collect(spec, chunks)
         else:
             expert = dataset(spec.base("expert"))
             if spec.expert_ratio == 1.0:
@@ -124,6 +130,7 @@ def dataset(spec: DataSpec) -> Dataset:
                 )
         made = made.with_metadata(grid_spec=spec.key())
         made.save(path)
+        remove_chunks(chunks)
         _publish([name])
     return made
 
@@ -149,7 +156,7 @@ def collecting_policy(spec: DataSpec) -> tuple[Policy, str]:
     return make_policy(spec.expert, spec.task, **noise), "sparse"
 
 
-def _collect(spec: DataSpec) -> Dataset:
+def _collect(spec: DataSpec, chunks_dir: Path) -> Dataset:
     policy, reward = collecting_policy(spec)
     return collect(
         policy,
@@ -161,6 +168,7 @@ def _collect(spec: DataSpec) -> Dataset:
         labels=spec.expert_labels,
         goal_region=None if spec.goal_region is None else GoalRegion.parse(spec.goal_region),
         progress=False,
+        chunks_dir=chunks_dir,
     )
 
 

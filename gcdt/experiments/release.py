@@ -55,9 +55,10 @@ RELEASE_REWARD = "sparse"
 #: Evaluation seed of the reference scores (the grid's run seeds are evaluated from 0 too).
 REFERENCE_SEED = 0
 #: Metadata of a collection that differs between two identical collections: its time, its
-#: timings, and the versions of every tracked package (torch's differs between CPU and CUDA
-#: builds); the versions that decide the bytes are the card's `requirements`.
-VOLATILE_METADATA = ("created", "seconds", "stepping_seconds", "versions")
+#: timings, how many chunks a resumed collection loaded, and the versions of every tracked
+#: package (torch's differs between CPU and CUDA builds); the versions that decide the bytes
+#: are the card's `requirements`.
+VOLATILE_METADATA = ("created", "seconds", "stepping_seconds", "chunks_resumed", "versions")
 #: The packages whose versions decide the data and load its env (Minari's `requirements`).
 REQUIREMENTS = ("panda-gym", "gymnasium", "pybullet", "numpy")
 HDF5_FILE = "data/main_data.hdf5"

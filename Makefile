@@ -20,7 +20,7 @@ help:
 	@echo "make lint       ruff over gcdt/, tests/, benchmarks/, scripts/ and notebooks/"
 	@echo "make bench      throughput benchmarks -> results/bench/*.json, docs/benchmarks.md"
 	@echo "make bench-tqc  TQC+HER trained on Reach to success -> results/bench/tqc_her_reach.json"
-	@echo "make reproduce  PROFILE=smoke|quick|standard|paper (default quick; its time: gcdt sweep --profile P --dry-run) [BACKEND=local|ray]:"
+	@echo "make reproduce  PROFILE=smoke|quick|standard|large|paper (default quick; its time: gcdt sweep --profile P --dry-run) [BACKEND=local|ray]:"
 	@echo "                re-run the grid and every notebook into $(REPRO_DIR)/, then check"
 	@echo "                the results against the published ones (results/PROFILE/)"
 	@echo "make publish    (maintainers) make that reproduction the published results/ and figures/"

@@ -56,6 +56,16 @@ def test_two_collections_under_one_id_are_refused(monkeypatch):
         rel.release(SMOKE)
 
 
+def test_data_that_waits_for_its_agent_is_not_built(tmp_path, monkeypatch):
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
+    monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))
+    agent = tmp_path / "experts" / "tqc_reach_sparse" / "model.zip"  # not published
+    waiting = dataclasses.replace(_tiny(), expert_agents={"reach": str(agent)})
+    with pytest.raises(GcdtError, match=f"waits for published agents \\({agent}\\): publish"):
+        rel.build(waiting)
+    assert not (tmp_path / "minari").exists() and not (tmp_path / "artifacts").exists()
+
+
 def _tiny():
     """A smoke profile of one task and 100 transitions per collection, with one mixture."""
     return dataclasses.replace(

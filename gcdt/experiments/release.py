@@ -450,6 +450,12 @@ def build(profile: Profile, *, write_manifest: bool = False) -> list[dict[str, A
     built datasets must match it (`verify`)."""
     check_ids()
     rel = release(profile)
+    if waiting := sorted({s.waits_for for s in rel.bases.values() if s.waits_for}):
+        raise GcdtError(
+            f"profile {profile.name}'s expert data waits for published agents "
+            f"({', '.join(waiting)}): publish them with `gcdt tqc publish RUN_DIR` first; "
+            "nothing was built"
+        )
     for ident, spec in rel.bases.items():  # refuse before building anything
         built = _built_key(ident)
         if built not in (None, spec.key()):

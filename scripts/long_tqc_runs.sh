@@ -8,7 +8,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT="${GCDT_ARTIFACTS:-artifacts}/long_tqc"
 runs=("$@")
-[ ${#runs[@]} -gt 0 ] || runs=(pick_and_place:sparse push:sparse reach:sparse push:dense pick_and_place:dense)
+# The sparse experts first (the large profile's data waits for them), then Table 1's dense cells.
+[ ${#runs[@]} -gt 0 ] ||
+  runs=(pick_and_place:sparse push:sparse reach:sparse push:dense pick_and_place:dense reach:dense)
 for run in "${runs[@]}"; do
   task="${run%%:*}" reward="${run##*:}" out="$ROOT/${task}_${reward}"
   [ -f "$out/run.json" ] && continue  # finished

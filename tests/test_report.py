@@ -445,5 +445,5 @@ def test_a_damaged_agent_record_is_refused_in_one_line(tmp_path):
     with pytest.raises(GcdtError, match=r"run.json is not a readable agent record .*publish"):
         read_agent(agent)
     (agent / "run.json").write_text('{"task": "push", "reward": "sparse"}')
-    with pytest.raises(GcdtError, match="run.json lacks seed, env_steps: publish it again"):
+    with pytest.raises(GcdtError, match=r"run\.json lacks seed, env_steps: publish it again"):
         read_agent(agent)

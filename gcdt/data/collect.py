@@ -6,6 +6,7 @@ import json
 import shutil
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -90,36 +91,24 @@ def collect(
     stream = "random-collection" if policy.name == "random" else "collection"
     env_kwargs = None if goal_region is None else {"goal_region": goal_region}
 
-    def rollout(first_episode: int) -> VectorRollout:
-        return VectorRollout(
-            policy,
-            task,
-            reward,
-            n_envs,
-            seed,
-            stream=stream,
-            env_kwargs=env_kwargs,
-            first_episode=first_episode,
+    # Each chunk's envs, started fresh at its first episode.
+    rollout = partial(VectorRollout, policy, task, reward, n_envs, seed, stream=stream,
+                      env_kwargs=env_kwargs)  # fmt: skip
+    seed_of = rollout(first_episode=0).seed_of  # checks the arguments before any work
+    # What every chunk of this collection shares (JSON, as the chunks store it).
+    identity = json.loads(
+        json.dumps(
+            {
+                "task": spec.name,
+                "policy": policy.config(),
+                **{"reward": reward, "seed": int(seed), "n_envs": int(n_envs), "labels": labels},
+                "goal_region": None if goal_region is None else str(goal_region),
+                "transitions_requested": int(transitions),
+                "chunk_transitions": CHUNK_TRANSITIONS,
+                "versions": package_versions(),
+            }
         )
-
-    seed_of = rollout(0).seed_of  # checks the arguments before anything is loaded or run
-    identity = {  # what every chunk of this collection shares (JSON, as chunks store it)
-        "task": spec.name,
-        "policy": policy.config(),
-        "reward": reward,
-        "seed": int(seed),
-        "n_envs": int(n_envs),
-        "labels": labels,
-        "goal_region": None if goal_region is None else str(goal_region),
-        "transitions_requested": int(transitions),
-        "chunk_transitions": CHUNK_TRANSITIONS,
-        "versions": package_versions(),
-    }
-    identity = json.loads(json.dumps(identity))
-    folder = None if chunks_dir is None else Path(chunks_dir)
-
-    parts: list[Dataset] = []
-    resumed, steps = 0, 0
+    )
     bar = progress_bar(
         total=transitions,
         unit="step",
@@ -127,40 +116,44 @@ def collect(
         progress=progress,
         leave=False,
     )
-    while steps < transitions:
+    parts: list[Dataset] = []
+    resumed = 0
+    while (steps := sum(len(p) for p in parts)) < transitions:
+        bar.update(steps - bar.n)
         where = {
             "chunk": len(parts),
             "first_episode": sum(p.n_episodes for p in parts),
             "transitions": min(CHUNK_TRANSITIONS, transitions - steps),
         }
-        path = None if folder is None else folder / f"{len(parts):05d}.npz"
+        path = None if chunks_dir is None else Path(chunks_dir) / f"{len(parts):05d}.npz"
         if path is not None and path.exists():
-            part = _resumed_chunk(path, {**identity, **where}, seed_of)
+            parts.append(_resumed_chunk(path, {**identity, **where}, seed_of))
             resumed += 1
-        else:
-            chunk = _collect_chunk(
-                rollout(where["first_episode"]), spec.name, where["transitions"], labels, bar
-            )
-            part = chunk.with_metadata(source="collect-chunk", **identity, **where)
-            if path is not None:
-                part.save(path)
-        parts.append(part)
-        steps += len(part)
-        bar.update(min(steps, transitions) - bar.n)
+            continue
+        chunk = _collect_chunk(
+            rollout(first_episode=where["first_episode"]), spec.name, where["transitions"],
+            labels, bar,
+        )  # fmt: skip
+        parts.append(chunk.with_metadata(source="collect-chunk", **identity, **where))
+        if path is not None:
+            parts[-1].save(path)
+    bar.update(transitions - bar.n)
     bar.close()
+    return concatenate(parts, _metadata(identity, parts, resumed))
 
-    # One chunk is the collection as it was before chunks existed, and so is its metadata.
+
+def _metadata(identity: dict[str, Any], parts: list[Dataset], resumed: int) -> dict[str, Any]:
+    """The collection's metadata: one chunk's is the collection's as it was before chunks
+    existed; more chunks add how many (and how many were resumed)."""
+    task, region = identity["task"], identity["goal_region"]
     chunking = {"chunks": len(parts), "chunk_transitions": CHUNK_TRANSITIONS}
-    metadata = {
+    return {
         "source": "collect",
-        "task": spec.name,
+        "task": task,
         "env_ids": {"sparse": env_id(task, "sparse"), "dense": env_id(task, "dense")},
-        "policy": policy.config(),
-        "seed": int(seed),
-        "n_envs": int(n_envs),
-        "labels": labels,
-        **({"goal_region": str(goal_region)} if goal_region is not None else {}),
-        "transitions_requested": int(transitions),
+        **{k: identity[k] for k in ("policy", "seed", "n_envs", "labels")},
+        **({"goal_region": region} if region is not None else {}),
+        "transitions_requested": identity["transitions_requested"],
         **(chunking if len(parts) > 1 else {}),
         **({"chunks_resumed": resumed} if resumed else {}),
         # The collecting time of every chunk, those of an interrupted earlier process included.
@@ -169,7 +162,6 @@ def collect(
         "created": utc_now(),
         "versions": package_versions(),
     }
-    return concatenate(parts, metadata)
 
 
 def _collect_chunk(

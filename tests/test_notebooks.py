@@ -31,7 +31,7 @@ def test_wrong_parameter_types_get_a_clear_message():
     from gcdt.report import check_parameters
 
     with pytest.raises(
-        GcdtError, match="parameter profile must be one of smoke, quick, standard, paper"
+        GcdtError, match="parameter profile must be one of smoke, quick, standard, large, paper"
     ):
         check_parameters(3, "local")
     with pytest.raises(GcdtError, match="parameter backend must be one of local, ray"):

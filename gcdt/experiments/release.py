@@ -37,7 +37,7 @@ from gcdt.data.dataset import Dataset
 from gcdt.envs import env_id
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import DataSpec, build_grid, data_spec
-from gcdt.experiments.profiles import PROFILES, Profile
+from gcdt.experiments.profiles import PAPER_TASKS, PROFILES, Profile
 from gcdt.paths import (
     REPO_ROOT,
     artifacts_dir,
@@ -157,7 +157,14 @@ def release(profile: Profile) -> Release:
             add(data)
         add(data.base("random"))  # random data for every task, used or not
     order = sorted(bases, key=lambda i: (bases[i].task, bases[i].expert == "random", i))
-    return Release(profile, {i: bases[i] for i in order}, tuple(derived.values()))
+    # Recipes in an order of their own, whatever order the sweep runs them in: subsets, then
+    # mixtures, each by task, size and expert share.
+    tasks = {task: i for i, task in enumerate(PAPER_TASKS)}
+    recipes = sorted(
+        derived.values(),
+        key=lambda d: (d.expert_ratio != 1.0, tasks[d.task], d.size, d.expert_ratio),
+    )
+    return Release(profile, {i: bases[i] for i in order}, tuple(recipes))
 
 
 def check_ids(profiles: dict[str, Profile] = PROFILES) -> None:

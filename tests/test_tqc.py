@@ -337,8 +337,12 @@ def test_the_published_push_expert_reaches_goals_and_can_collect_a_grids_data(tm
     assert policy.name == "tqc" and reward == "sparse"
     with pytest.raises(GcdtError, match="changed since this grid was planned"):
         collecting_policy(dataclasses.replace(spec, expert_digest="0" * 16))
-    with pytest.raises(GcdtError, match="no published expert agent at"):
-        data_spec(dataclasses.replace(SMOKE, expert_agents={"push": "nope.zip"}), "push", 10, 1.0)
+    # An agent not published (yet) is never stood in for: its data waits, and is not made.
+    waiting = data_spec(dataclasses.replace(SMOKE, expert_agents={"push": "nope.zip"}), "push",
+                        10, 1.0)  # fmt: skip
+    assert waiting.waits_for == "nope.zip" and waiting.key() != spec.key()
+    with pytest.raises(GcdtError, match=r"nope\.zip is not published yet"):
+        collecting_policy(waiting)
 
 
 def test_keep_lowest_keeps_what_a_sort_keeps_ties_included():

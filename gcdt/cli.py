@@ -657,6 +657,39 @@ class TQCPublish(_Command):
         return 0
 
 
+@dataclass(frozen=True, kw_only=True)
+class TQCSnapshot(_Command):
+    """keep a TQC+HER run in progress in a few MiB, to resume on another machine
+
+    Write the run's checkpoint without its replay buffer, its curve and its best model to
+    --out, replacing an older snapshot of the same run. Copy them into a run folder and resume
+    with gcdt tqc train --resume: the run refills its buffer and records that it did."""
+
+    name = "tqc snapshot"
+    run_dir: Path = setting(
+        REQUIRED,
+        "the --out folder of a gcdt tqc train run in progress",
+        metavar="RUN_DIR",
+        positional=True,
+    )
+    out: Path | None = setting(
+        None,
+        "the snapshot's folder (default: results/experts/in_progress/tqc_TASK_REWARD_seedS)",
+        metavar="DIR",
+    )
+
+    def run(self, command: str) -> int:
+        from gcdt.baselines.publish import snapshot_run
+
+        out, header = snapshot_run(self.run_dir, self.out)
+        mib = sum(f.stat().st_size for f in out.iterdir()) / 2**20
+        print(
+            f"TQC+HER {header['task']}/{header['reward']} seed {header['seed']} at "
+            f"{header['env_steps']:,} env steps, without its replay buffer ({mib:.1f} MiB): {out}"
+        )
+        return 0
+
+
 _PROFILE_HELP = "the size of the grid (docs/experiments.md)"
 
 
@@ -872,6 +905,7 @@ COMMANDS: tuple[type[_Command], ...] = (
     Train,
     TQCTrain,
     TQCPublish,
+    TQCSnapshot,
     Sweep,
     Report,
     Compare,

@@ -2,20 +2,37 @@
 # Issue 42's long TQC+HER runs (1M env steps, cpu config, sbx loop, seed 0), one after the
 # other, each started or resumed from its checkpoint: re-run this script after any stop.
 # Usage: nohup scripts/long_tqc_runs.sh [task:reward ...] >> artifacts/long_tqc_runs.log 2>&1 &
+#        scripts/long_tqc_runs.sh --snapshot   (before a session ends: commit what it writes)
 # With no arguments it walks every run; two instances given disjoint lists use both cores
 # (two instances must never share a run: they would write the same checkpoint).
+# On a machine without a run's checkpoint, the run carries on from its committed snapshot
+# (results/experts/in_progress/, `gcdt tqc snapshot`), which has no replay buffer to refill.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT="${GCDT_ARTIFACTS:-artifacts}/long_tqc"
+SEED=0
+if [ "${1:-}" = "--snapshot" ]; then
+  for out in "$ROOT"/*/; do
+    [ -f "$out/checkpoint.tqc" ] && .venv/bin/gcdt tqc snapshot "$out"
+  done
+  exit 0
+fi
 runs=("$@")
 # The sparse experts first (the large profile's data waits for them), then Table 1's dense cells.
 [ ${#runs[@]} -gt 0 ] ||
   runs=(pick_and_place:sparse push:sparse reach:sparse push:dense pick_and_place:dense reach:dense)
 for run in "${runs[@]}"; do
   task="${run%%:*}" reward="${run##*:}" out="$ROOT/${task}_${reward}"
-  [ -f "$out/run.json" ] && continue  # finished
+  [ -f "$out/run.json" ] && continue                                  # finished here
+  agent="results/experts/tqc_${task}_${reward}/run.json"                # finished and published
+  [ -f "$agent" ] && .venv/bin/python -c 'import json, sys
+sys.exit(json.load(open(sys.argv[1]))["env_steps"] < 1_000_000)' "$agent" && continue
+  snapshot="results/experts/in_progress/tqc_${task}_${reward}_seed${SEED}"
+  if [ ! -f "$out/checkpoint.tqc" ] && [ -f "$snapshot/checkpoint.tqc" ]; then
+    mkdir -p "$out" && cp "$snapshot"/* "$out"/
+  fi
   resume=()
   [ -f "$out/checkpoint.tqc" ] && resume=(--resume)
   .venv/bin/gcdt tqc train --task "$task" --reward "$reward" --config cpu --steps 1000000 \
-    --seed 0 --eval-every 25000 --eval-episodes 100 --out "$out" --no-progress "${resume[@]}"
+    --seed "$SEED" --eval-every 25000 --eval-episodes 100 --out "$out" --no-progress "${resume[@]}"
 done

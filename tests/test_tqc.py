@@ -444,14 +444,18 @@ def checkpointed(tmp_path_factory):
 
 def _all_weights(zip_path) -> list[np.ndarray]:
     """Every array of an SBX TQC zip's actor and critics (their targets included)."""
-    import jax
     from sbx import TQC
 
     env = make_env("reach", "sparse")
     try:
-        policy = TQC.load(zip_path, env=env).policy
+        return _policy_weights(TQC.load(zip_path, env=env).policy)
     finally:
         env.close()
+
+
+def _policy_weights(policy) -> list[np.ndarray]:
+    import jax
+
     states = [policy.actor_state.params, policy.qf1_state.params, policy.qf2_state.params]
     states += [policy.qf1_state.target_params, policy.qf2_state.target_params]
     return [np.asarray(leaf) for leaf in jax.tree_util.tree_leaves(states)]
@@ -460,22 +464,14 @@ def _all_weights(zip_path) -> list[np.ndarray]:
 def _add_to_clock(path, seconds):
     """Rewrite checkpoint `path` as if its run had taken `seconds` more wall and CPU time
     before it (the learning-speed mark moves with the clock: the rate since it is unchanged)."""
-    import hashlib
-    import struct
-
-    import cloudpickle
-
-    from gcdt.baselines.tqc_checkpoint import MAGIC, _read
+    from gcdt.baselines.tqc_checkpoint import _read, _write
 
     header, payload = _read(path, payload=True)
     extra = payload["extra"]
     extra["clock"] = {k: v + seconds for k, v in extra["clock"].items()}
     step, wall, eval_seconds = extra["evaluation"]["learning_mark"]
     extra["evaluation"]["learning_mark"] = (step, wall + seconds, eval_seconds)
-    blob = cloudpickle.dumps(payload)
-    header |= {"payload_bytes": len(blob), "payload_sha256": hashlib.sha256(blob).hexdigest()}
-    head = json.dumps(header, sort_keys=True).encode()
-    path.write_bytes(MAGIC + struct.pack("<Q", len(head)) + head + blob)
+    _write(path, header, payload)
     return extra["clock"]
 
 
@@ -521,6 +517,81 @@ def test_a_killed_run_resumes_and_finishes_as_one_run(checkpointed, tmp_path):
     # The learning speed counts from its mark, which moved with the clock: counted from the
     # day before, it would be under 1,600 steps a day.
     assert record["learning_steps_per_second"] > 1600 / day
+
+
+def test_a_snapshot_resumes_on_a_fresh_folder_and_refills_its_buffer(
+    checkpointed, tmp_path, capsys
+):
+    """`gcdt tqc snapshot`: the checkpoint without its buffer (a fraction of its size), the
+    curve and the best model; a fresh folder resumes from it, records the refill, and takes
+    no gradient step before `learning_starts` new random steps have refilled the buffer."""
+    from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE, has_buffer, read_header
+
+    snap = tmp_path / "snap"
+    assert main(["tqc", "snapshot", str(checkpointed), "--out", str(snap)]) == 0
+    full, kept = read_header(checkpointed / CHECKPOINT_FILE), read_header(snap / CHECKPOINT_FILE)
+    steps = kept["env_steps"]
+    assert f"at {steps:,} env steps" in capsys.readouterr().out
+    assert has_buffer(full) and not has_buffer(kept) and steps == full["env_steps"]
+    assert (snap / CHECKPOINT_FILE).stat().st_size < (checkpointed / CHECKPOINT_FILE).stat().st_size
+    assert sorted(p.name for p in snap.iterdir()) == [
+        "best_model.zip",
+        "checkpoint.tqc",
+        "eval.csv",
+    ]
+    # Another machine: only the snapshot's files in the run's folder.
+    out = tmp_path / "elsewhere"
+    shutil.copytree(snap, out)
+    assert main(_reach_argv(out, "--resume", "--checkpoint-seconds", "3600")) == 0
+    record = json.loads((out / "run.json").read_text())
+    assert record["env_steps"] == 1600 and record["buffer_refills"] == [steps]
+    # 1000 warm-up steps from `steps` (> 1100) pass the 1,600-step budget: no gradient step
+    # after the resume, so the final weights are the snapshot's.
+    from gcdt.baselines.tqc_checkpoint import _read
+
+    saved = _read(snap / CHECKPOINT_FILE, payload=True)[1]["model"].policy
+    final, at_snapshot = _all_weights(out / "model.zip"), _policy_weights(saved)
+    for ours, theirs in zip(final, at_snapshot, strict=True):
+        np.testing.assert_array_equal(ours, theirs)
+
+
+@pytest.mark.parametrize(
+    ("case", "message"),
+    [
+        ("no checkpoint", "holds no TQC+HER checkpoint: snapshot a run in progress"),
+        ("run folder", "is a run's folder, not a snapshot"),
+        ("other run", "a checkpoint of reward 'sparse', not 'dense'"),
+        ("later snapshot", "holds a later snapshot of this run"),
+        ("not a snapshot", "exists and is not a run's snapshot"),
+    ],
+)
+def test_tqc_snapshot_refuses_bad_input_in_one_line(
+    assert_usage_error, checkpointed, tmp_path, case, message
+):
+    from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE, _read, _write, strip_buffer
+
+    run, out = checkpointed, tmp_path / "snap"
+    if case == "no checkpoint":
+        run = tmp_path / "empty"
+        run.mkdir()
+    elif case == "run folder":
+        shutil.copytree(checkpointed, out)
+    elif case == "not a snapshot":
+        out.mkdir()
+        (out / "notes.txt").write_text("mine")
+    else:  # a snapshot already there, of another run or further on
+        out.mkdir()
+        strip_buffer(checkpointed / CHECKPOINT_FILE, out / CHECKPOINT_FILE)
+        header, payload = _read(out / CHECKPOINT_FILE, payload=True)
+        if case == "other run":
+            header["reward"] = "dense"
+        else:
+            header["env_steps"] += 8
+        _write(out / CHECKPOINT_FILE, header, payload)
+    before = _unchanged(out) if out.exists() else None
+    assert_usage_error(["tqc", "snapshot", str(run), "--out", str(out)], message)
+    assert (_unchanged(out) if out.exists() else None) == before
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # nothing staged
 
 
 def test_resume_without_a_checkpoint_is_one_line_exit_2(assert_usage_error, tmp_path):
@@ -683,13 +754,19 @@ def test_tqc_publish_replace_swaps_the_old_agent_for_the_new_one_whole(
     # A publication that fails while measuring leaves the old agent as it was.
     import gcdt.baselines.publish as publish
 
+    # The run's snapshot beside the agents goes once the run is published, not before.
+    seed = json.loads((push_run.out_dir / "run.json").read_text())["seed"]
+    snapshot = out.parent / "in_progress" / f"tqc_push_sparse_seed{seed}"
+    snapshot.mkdir(parents=True)
+    (snapshot / "checkpoint.tqc").write_text("x")
     before = _unchanged(out)
     with monkeypatch.context() as m:
         m.setattr(publish, "_measure", lambda *a, **k: 1 / 0)
         with pytest.raises(ZeroDivisionError):
             main(argv)
-    assert _unchanged(out) == before
+    assert _unchanged(out) == before and snapshot.exists()
     assert main(argv) == 0
+    assert not snapshot.exists()
     assert f"on 3 held-out episodes: {out}" in capsys.readouterr().out
     assert sorted(p.name for p in out.iterdir()) == ["eval.csv", "model.zip", "run.json"]
     record = json.loads((out / "run.json").read_text())

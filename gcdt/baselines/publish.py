@@ -1,4 +1,5 @@
-"""Publish a finished TQC+HER run as an agent others can use (`results/experts/tqc_*/`).
+"""Publish a TQC+HER run: a finished one as an agent others can use (`results/experts/tqc_*/`),
+one in progress as a snapshot a fresh machine resumes (`results/experts/in_progress/`).
 
 A run leaves two models, the last one and the best one by its periodic evaluations. Picking
 the best by those same evaluations would flatter it, so both are measured again on fresh
@@ -10,6 +11,11 @@ extended with the curve and a `published` record of the choice and both measurem
 
 `gcdt tqc publish RUN_DIR` runs it. An agent already published in the folder is replaced only
 when asked (`replace`), and then in one swap: readers see the old agent or the new one.
+
+A 1M-step run outlasts a working session, and a session may end on another machine than the
+next one starts on. `gcdt tqc snapshot RUN_DIR` keeps what the run needs to carry on there, in
+a few MiB the repository can hold: its checkpoint without the replay buffer (`strip_buffer`),
+its curve and its best model. Copied into a run folder, `--resume` continues from it.
 """
 
 from __future__ import annotations
@@ -18,11 +24,19 @@ import csv
 import json
 import shutil
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE
+from gcdt.baselines.tqc_checkpoint import (
+    CHECKPOINT_FILE,
+    check_identity,
+    has_buffer,
+    read_header,
+    strip_buffer,
+)
 from gcdt.baselines.tqc_her import BEST_MODEL_ZIP, EVAL_CSV, MODEL_ZIP, RUN_JSON
 from gcdt.errors import GcdtError
 from gcdt.paths import REPO_ROOT, check_writable, swap_dirs, write_json_atomic
@@ -30,6 +44,8 @@ from gcdt.provenance import git_commit, utc_now
 from gcdt.settings import check_minimums, setting
 
 AGENTS_DIR = REPO_ROOT / "results" / "experts"
+#: Beside the agents: the snapshots of the runs that will become agents.
+SNAPSHOTS_DIR = AGENTS_DIR / "in_progress"
 #: Episode seeds of the validation and of the held-out measurement: apart from each other and
 #: from training's and the periodic evaluations' (seeds 0-2 and 1000 and their streams).
 VALIDATION_SEED, HELD_OUT_SEED = 4000, 5000
@@ -140,7 +156,8 @@ def publish_agent(
 ) -> Path:
     """Publish the finished run in `run` (default folder: `agent_dir(task, reward)`); returns
     the folder. An agent already there is refused unless `replace` (of the same task and
-    reward); it is then swapped for the new one whole."""
+    reward); it is then swapped for the new one whole. The run's snapshot beside the agents
+    (`snapshot_dir` under out's folder), if one is kept, is removed: the run is finished."""
     run = Path(run)
     record = _finished_run(run)
     task, reward = record["task"], record["reward"]
@@ -167,18 +184,74 @@ def publish_agent(
         "created": utc_now(),
         "git_commit": git_commit(),
     }
-    # Built beside `out` and renamed (or swapped) into place: a stop leaves no half-published
-    # agent, and a replaced one is whole until the new one is.
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    with _built_whole(out) as staging:  # `replace` was checked above
         shutil.copyfile(run / CANDIDATES[chosen], staging / MODEL_ZIP)
         shutil.copyfile(run / EVAL_CSV, staging / EVAL_CSV)
         write_json_atomic(staging / RUN_JSON, {**record, "curve": curve, "published": published})
+    snapshots = out.parent / SNAPSHOTS_DIR.name
+    shutil.rmtree(snapshot_dir(task, reward, record["seed"], snapshots), ignore_errors=True)
+    return out
+
+
+def snapshot_dir(task: str, reward: str, seed: int, root: str | Path = SNAPSHOTS_DIR) -> Path:
+    """Where the snapshot of the run of `task`, `reward` and `seed` in progress is kept."""
+    return Path(root) / f"tqc_{task}_{reward}_seed{seed}"
+
+
+def snapshot_run(run: str | Path, out: str | Path | None = None) -> tuple[Path, dict[str, Any]]:
+    """Snapshot the run in progress in `run` (default folder: `snapshot_dir`): its checkpoint
+    without the replay buffer, `eval.csv` and `best_model.zip`. An older snapshot of the same
+    run is replaced in one swap; anything else in `out` is refused. Returns the folder and the
+    snapshot's checkpoint header."""
+    run = Path(run)
+    if not (run / CHECKPOINT_FILE).is_file():
+        raise GcdtError(
+            f"{run} holds no TQC+HER checkpoint: snapshot a run in progress (gcdt tqc train "
+            "--out), or publish a finished one with gcdt tqc publish"
+        )
+    header = read_header(run / CHECKPOINT_FILE)
+    out = Path(out) if out is not None else snapshot_dir(*_run_of(header))
+    check_writable(out.parent, folder=True)
+    if out.exists() or out.is_symlink():
+        old = out / CHECKPOINT_FILE
+        if out.is_symlink() or not old.is_file():
+            raise GcdtError(f"{out} exists and is not a run's snapshot: choose another --out")
+        previous = read_header(old)
+        if has_buffer(previous):
+            raise GcdtError(f"{out} is a run's folder, not a snapshot: choose another --out")
+        check_identity(old, previous, header)  # a snapshot of another run: one line
+        if previous["env_steps"] > header["env_steps"]:
+            raise GcdtError(
+                f"{out} holds a later snapshot of this run ({previous['env_steps']:,} env steps, "
+                f"{run} is at {header['env_steps']:,}): resume from it, or choose another --out"
+            )
+    with _built_whole(out) as staging:
+        kept = strip_buffer(run / CHECKPOINT_FILE, staging / CHECKPOINT_FILE)
+        # The curve and best model may run ahead of the checkpoint: a resume rewrites the
+        # curve to the checkpoint's, and publishing measures the best model again anyway.
+        for name in (EVAL_CSV, BEST_MODEL_ZIP):
+            if (run / name).is_file():
+                shutil.copyfile(run / name, staging / name)
+    return out, kept
+
+
+@contextmanager
+def _built_whole(out: Path) -> Iterator[Path]:
+    """A folder to build `out`'s new content in, beside it, renamed (or swapped) into place
+    when the block ends: a stop leaves no half-built folder, and a replaced one is whole until
+    the new one is."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        staging.chmod(0o755)  # mkdtemp's 0700 would become the published folder's
+        yield staging
         if out.exists():
-            swap_dirs(staging, out)  # `replace` was checked above; staging now holds the old
+            swap_dirs(staging, out)  # staging now holds the old content
         else:
             staging.rename(out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    return out
+
+
+def _run_of(header: dict[str, Any]) -> tuple[str, str, int]:
+    return header["task"], header["reward"], header["seed"]

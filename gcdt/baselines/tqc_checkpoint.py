@@ -15,6 +15,12 @@ a reset does not clear and a checkpoint does not hold: the replayed steps then d
 slightly from the original ones (docs/library.md gives the size). So the learner resumes
 exactly, and the envs up to that difference.
 
+A copy of a checkpoint may leave the replay buffer out (`strip_buffer`): a few MiB
+instead of hundreds, small enough to travel with the repository to a fresh machine. The learner,
+its optimisers, RNG states and curve resume exactly; the transitions do not, so the run refills
+an empty buffer as it began, with `learning_starts` random steps before its next gradient step,
+and records where it did (`buffer_refills` in its run.json).
+
 The file: a magic line, the length of a JSON header, the header (what the run is, and the
 payload's length and SHA-256), then the pickled payload; written to a temp file, synced and
 renamed, so a reader sees the old checkpoint or the new one, never half of one.
@@ -44,19 +50,36 @@ IDENTITY_KEYS = ("task", "reward", "seed", "backend", "config", "evaluation")
 
 def save_checkpoint(path: Path, model: Any, identity: dict[str, Any], extra: Any) -> int:
     """Write `model`'s training state and `extra` to `path` atomically; return its bytes."""
-    import cloudpickle
-
-    envs = model.env
     payload = {
         "model": _detached(model),
-        "envs": [env.replay_state() for env in _seeded(envs)],
+        "envs": [env.replay_state() for env in _seeded(model.env)],
         "rng": _global_rng_state(),
         "extra": extra,
     }
+    header = {**identity, "env_steps": int(model.num_timesteps), "buffer": True}
+    return _write(path, header, payload)
+
+
+def strip_buffer(src: Path, dst: Path) -> dict[str, Any]:
+    """Write checkpoint `src` to `dst` without its replay buffer; return `dst`'s header."""
+    header, payload = _read(src, payload=True)
+    payload["model"].replay_buffer = None
+    header = {**header, "buffer": False}
+    _write(dst, header, payload)
+    return header
+
+
+def has_buffer(header: dict[str, Any]) -> bool:
+    """Whether the checkpoint of `header` holds its replay buffer (older ones always do)."""
+    return header.get("buffer", True)
+
+
+def _write(path: Path, header: dict[str, Any], payload: dict[str, Any]) -> int:
+    import cloudpickle
+
     blob = cloudpickle.dumps(payload, protocol=pickle.HIGHEST_PROTOCOL)
     header = {
-        **identity,
-        "env_steps": int(model.num_timesteps),
+        **header,
         "payload_bytes": len(blob),
         "payload_sha256": hashlib.sha256(blob).hexdigest(),
     }
@@ -90,11 +113,17 @@ def load_checkpoint(path: Path, model: Any) -> Any:
     saved `extra`."""
     _, payload = _read(path, payload=True)
     saved = payload["model"]
-    envs = model.env
+    envs, fresh_buffer, warm_up = model.env, model.replay_buffer, model.learning_starts
     buffer = saved.replay_buffer
     model.__dict__.update(saved.__dict__)
     model.env = envs
-    _fill_buffer(buffer)
+    if buffer is None:
+        # The transitions stayed behind: the run refills an empty buffer as it began, with
+        # random steps (SB3 acts at random below `learning_starts`) before its next update.
+        buffer = model.replay_buffer = fresh_buffer
+        model.learning_starts = model.num_timesteps + warm_up
+    else:
+        _fill_buffer(buffer)
     if hasattr(buffer, "set_env"):  # HER recomputes rewards through the envs
         buffer.set_env(envs)
     for env, state in zip(_seeded(envs), payload["envs"], strict=True):

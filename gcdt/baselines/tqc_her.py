@@ -17,7 +17,8 @@ wall-clock time and env steps/s.
 
 A run checkpoints itself every `checkpoint_seconds` (`tqc_checkpoint.py`); `resume=True`
 carries on from the last checkpoint (the learner exactly, the envs up to state PyBullet keeps:
-see that module).
+see that module), or from a snapshot without the replay buffer (`gcdt tqc snapshot`), which
+refills the buffer.
 
 Output folder: `model.zip` (last), `best_model.zip`, `eval.csv`, `run.json`, and while the run
 is in progress `checkpoint.tqc`.
@@ -38,6 +39,7 @@ import yaml
 from gcdt.baselines.tqc_checkpoint import (
     CHECKPOINT_FILE,
     check_identity,
+    has_buffer,
     load_checkpoint,
     read_header,
     save_checkpoint,
@@ -283,6 +285,8 @@ class _Run:
     commit: str | None
     command: str | None
     resumes: int = 0
+    #: Env steps at which the run resumed without its replay buffer (`strip_buffer`).
+    buffer_refills: list[int] = field(default_factory=list)
 
     @classmethod
     def start(
@@ -346,11 +350,15 @@ class _Run:
             commit, command,
         )  # fmt: skip
         if resume:
+            buffer = has_buffer(read_header(out / CHECKPOINT_FILE))
             saved = load_checkpoint(out / CHECKPOINT_FILE, model)
             model.gcdt = saved["gcdt"]
             clock.set_state(saved["clock"])
             evaluator.set_state(saved["evaluation"])
             run.resumes = saved["resumes"] + 1
+            run.buffer_refills = saved.get("buffer_refills", [])
+            if not buffer:
+                run.buffer_refills = [*run.buffer_refills, int(model.num_timesteps)]
             run.commit, run.command = saved["git_commit"], saved["command"]  # as it started
         return run
 
@@ -361,6 +369,7 @@ class _Run:
             "evaluation": self.evaluator.state(),
             "clock": self.clock.state(),
             "resumes": self.resumes,
+            "buffer_refills": self.buffer_refills,
             "git_commit": self.commit,
             "command": self.command,
         }
@@ -414,6 +423,7 @@ class _Run:
             # CPU time of every thread over the kept work (a resume's repeated part excluded)
             "core_hours": round(self.clock.cpu_seconds() / 3600, 3),
             "resumes": self.resumes,
+            "buffer_refills": self.buffer_refills,
             "best": evaluator.best_row,
             "final": evaluator.rows[-1] if evaluator.rows else None,
             "command": self.command,

@@ -842,9 +842,9 @@ _REPRODUCTION_HELP = "the reproduction's folder (default: $GCDT_OUTPUTS, else ar
 class Compare(_Command):
     """check a reproduction against the published results
 
-    For every Table 1 cell, ablation cell and Fig. 3/4 point: the published value and its 95 %
-    interval, yours, the difference, and whether yours lies inside. Writes
-    results/PROFILE/reproduction_check.{csv,md} under --ours."""
+    For every Table 1 cell, ablation cell and Fig. 3/4 point: the published value, yours, the
+    difference with its 95 % interval (Welch, from both runs' seeds), and whether that interval
+    contains 0. Writes results/PROFILE/reproduction_check.{csv,md} under --ours."""
 
     name = "compare"
     profile: str = setting(REQUIRED, _PROFILE_HELP, choices=PROFILES)

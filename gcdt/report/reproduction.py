@@ -3,9 +3,13 @@
 `make reproduce` runs a profile's grid into a working folder of its own (`$GCDT_OUTPUTS`,
 default `artifacts/reproduce/`), never into `results/<profile>/`, and ends with
 `reproduction_check`: for every Table 1 cell, ablation cell and Fig. 3 / Fig. 4 point, the
-published value with its 95 % interval, the user's value, the difference, and whether the
-user's value lies inside the published interval. `publish` (maintainers, `make publish`)
+published value, the user's, their difference with its 95 % interval (Welch's t over both
+runs' seeds), and whether that interval contains 0. `publish` (maintainers, `make publish`)
 makes a finished working run the new published results.
+
+Why the difference's interval and not the published value's: the published value's interval
+holds the published mean's uncertainty only, and a re-run's mean has as much of its own, so an
+honest re-run would fall outside it far more often than its level says.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
@@ -22,39 +27,58 @@ from gcdt.experiments.release import MANIFEST_NAME
 from gcdt.experiments.store import RunStore
 from gcdt.paths import REPO_ROOT, figures_dir, results_dir, write_if_changed
 from gcdt.report import tables
+from gcdt.report.tables import Sample
 
 CHECK_NAME = "reproduction_check"
-#: Values within this of an interval's edge count as inside it (rounding of stored floats).
+#: The confidence level of the difference's interval: an honest re-run disagrees on about
+#: 1 - LEVEL of its values by chance.
+LEVEL = 0.95
+#: A difference within this of its interval counts as inside it (rounding of stored floats).
 TOLERANCE = 1e-9
+COLUMNS = ["item", "metric", "published", "ours", "difference", "diff_low", "diff_high", "over"]
 
 
-def _points(runs: pd.DataFrame) -> pd.DataFrame:
-    """Every value the tables and figures show, with its 95 % interval: one row per item and
-    metric (success in %, return)."""
+def _level() -> str:
+    return f"{100 * LEVEL:.0f} %"
+
+
+def _chance() -> str:
+    """How often an honest re-run's value disagrees by chance, in words ("1 in 20")."""
+    return f"1 in {round(1 / (1 - LEVEL))}"
+
+
+def welch_interval(ours: Sample, published: Sample) -> tuple[float, float]:
+    """The LEVEL interval of `ours.mean - published.mean` by Welch's t (no equal spreads
+    assumed; Welch-Satterthwaite degrees of freedom). The difference itself when neither side
+    has spread; NaN when a side's spread is unknown."""
+    difference = ours.mean - published.mean
+    a, b = ours.std**2 / ours.n, published.std**2 / published.n  # squared standard errors
+    if a + b == 0:
+        return difference, difference
+    df = (a + b) ** 2 / (a**2 / (ours.n - 1) + b**2 / (published.n - 1))
+    half = stats.t.ppf(0.5 + LEVEL / 2, df) * np.sqrt(a + b)
+    return float(difference - half), float(difference + half)
+
+
+def _samples(runs: pd.DataFrame) -> pd.DataFrame:
+    """Every value the tables and figures show, with its `tables.Sample` (what its mean is a
+    mean of): one row per item and metric (success in %, return)."""
     rows = []
 
     def add(item: str, cell: pd.Series, metrics: tuple[str, ...]) -> None:
         for metric in metrics:
-            rows.append(
-                {
-                    "item": item,
-                    "metric": metric,
-                    "value": cell[f"{metric}_mean"],
-                    "low": cell[f"{metric}_ci_low"],
-                    "high": cell[f"{metric}_ci_high"],
-                }
-            )
+            rows.append({"item": item, "metric": metric, "sample": cell[f"{metric}_sample"]})
 
     def where(task: str, reward: str) -> str:
         return f"{tables.TASK_NAMES[task]} {reward}"
 
-    for _, c in tables.table1(runs).iterrows():
+    for _, c in tables.table1(runs, samples=True).iterrows():
         add(
             f"Table 1: {tables.METHOD_NAMES[c['method']]}, {where(c['task'], c['reward'])}",
             c,
             ("success", "return"),
         )
-    ablation = tables.ablation_table(runs)
+    ablation = tables.ablation_table(runs, samples=True)
     for _, c in ablation[ablation["method"] != "gcdt"].iterrows():
         add(
             f"Ablation: {tables.METHOD_NAMES[c['method']]}, {where(c['task'], c['reward'])}",
@@ -62,51 +86,81 @@ def _points(runs: pd.DataFrame) -> pd.DataFrame:
             ("success", "return"),
         )
     for (section, x), label in zip(tables.CURVES.values(), ("Fig. 3", "Fig. 4"), strict=True):
-        for _, c in tables.curve_table(runs, section, x).iterrows():
+        for _, c in tables.curve_table(runs, section, x, samples=True).iterrows():
             at = f"{int(c[x]):,} transitions" if x == "size" else f"{100 * c[x]:.0f} % expert"
             add(f"{label}: {where(c['task'], c['reward'])}, {at}", c, ("success",))
-    return pd.DataFrame(rows, columns=["item", "metric", "value", "low", "high"])
+    return pd.DataFrame(rows, columns=["item", "metric", "sample"])
+
+
+def _compare(published: Sample | None, ours: Sample | None) -> dict:
+    """One item's columns of the check (NaN where a side has no value)."""
+    if published is None or ours is None:
+        mean = published.mean if published is not None else np.nan
+        return dict.fromkeys(COLUMNS[3:], np.nan) | {"published": mean, "over": ""}
+    low, high = welch_interval(ours, published)
+    over = published.over if published.over == ours.over else f"{published.over} / {ours.over}"
+    return {
+        "published": published.mean,
+        "ours": ours.mean,
+        "difference": ours.mean - published.mean,
+        "diff_low": low,
+        "diff_high": high,
+        "over": over,
+    }
 
 
 def reproduction_check(published: pd.DataFrame, ours: pd.DataFrame) -> pd.DataFrame:
-    """Published value and interval, ours, the difference, and whether ours lies inside the
-    published interval, for every item of the published tables and figures."""
-    merged = _points(published).merge(
-        _points(ours)[["item", "metric", "value"]].rename(columns={"value": "ours"}),
-        on=["item", "metric"],
-        how="left",
+    """For every item of the published tables and figures: the published value, ours, the
+    difference (ours - published) with its LEVEL interval (Welch's t over both runs' seeds;
+    over its evaluation episodes for a side with one seed; `over` says which, published /
+    ours when they differ), and whether that interval contains 0. A missing value never
+    agrees; a value whose spread is unknown agrees only when it equals the published one."""
+    merged = _samples(published).merge(
+        _samples(ours).rename(columns={"sample": "ours_sample"}), on=["item", "metric"], how="left"
     )
-    merged = merged.rename(columns={"value": "published"})
-    merged["difference"] = merged["ours"] - merged["published"]
-    merged["agrees"] = (merged["ours"] >= merged["low"] - TOLERANCE) & (
-        merged["ours"] <= merged["high"] + TOLERANCE
+    check = pd.DataFrame(
+        [
+            {"item": item, "metric": metric, **_compare(p, o if isinstance(o, Sample) else None)}
+            for item, metric, p, o in merged.itertuples(index=False)
+        ],
+        columns=COLUMNS,
     )
-    return merged
+    inside = (check["diff_low"] <= TOLERANCE) & (check["diff_high"] >= -TOLERANCE)
+    unknown = check["diff_low"].isna() & (check["difference"].abs() <= TOLERANCE)
+    check["agrees"] = inside | unknown
+    return check
 
 
 def check_markdown(check: pd.DataFrame) -> str:
     """The check as a Markdown table, then one summary line."""
     unit = {"success": " %", "return": ""}
     lines = [
-        "| item | metric | published [95 % interval] | ours | difference | agrees |",
-        "|---|---|---|---|---|---|",
+        f"| item | metric | published | ours | difference [{_level()} interval] | over | agrees |",
+        "|---|---|---|---|---|---|---|",
     ]
     for r in check.itertuples():
         ours = "missing" if np.isnan(r.ours) else f"{r.ours:.2f}{unit[r.metric]}"
         diff = "" if np.isnan(r.difference) else f"{r.difference:+.2f}"
+        if not np.isnan(r.diff_low):
+            diff += f" [{r.diff_low:+.2f}, {r.diff_high:+.2f}]"
+        elif diff:
+            diff += " [no spread known]"
         lines.append(
-            f"| {r.item} | {r.metric} | {r.published:.2f}{unit[r.metric]} [{r.low:.2f}, "
-            f"{r.high:.2f}] | {ours} | {diff} | {'yes' if r.agrees else '**no**'} |"
+            f"| {r.item} | {r.metric} | {r.published:.2f}{unit[r.metric]} | {ours} | {diff} "
+            f"| {r.over} | {'yes' if r.agrees else '**no**'} |"
         )
     return "\n".join(lines) + "\n\n" + summary_line(check)
 
 
 def summary_line(check: pd.DataFrame) -> str:
+    """How many values agree, what agreeing means, and how many disagree by chance."""
     success = check[check["metric"] == "success"]
     return (
-        f"{int(check['agrees'].sum())} of {len(check)} values agree within the published 95 % "
-        f"intervals (success rates: {int(success['agrees'].sum())} of {len(success)}; "
-        f"missing: {int(check['ours'].isna().sum())})."
+        f"{int(check['agrees'].sum())} of {len(check)} values agree: the {_level()} interval "
+        "of the difference of means (ours - published), from both runs' seed spread (Welch), "
+        f"contains 0 (success rates: {int(success['agrees'].sum())} of {len(success)}; "
+        f"missing: {int(check['ours'].isna().sum())}). At that level about {_chance()} values "
+        "of an honest re-run disagree by chance."
     )
 
 
@@ -138,11 +192,13 @@ def write_check(
     text = (
         f"# Reproduction check: profile `{profile.name}`\n\n"
         f"The runs of this reproduction against the published ones (`results/{profile.name}/` "
-        "of the repository). "
-        "An interval is the published value's 95 % interval: over seeds (bootstrap) when a "
-        "cell has several, else over the evaluation episodes of its one run.\n\n"
-        + check_markdown(check)
-        + "\n"
+        f"of the repository). A value agrees when the {_level()} interval of the difference of "
+        "means (ours - published), from both runs' seed spread (Welch's t interval), contains "
+        "0; where a side has one seed, its spread is that run's evaluation episodes' (`over`). "
+        f"At that level about {_chance()} values of an honest re-run (another CPU's floating "
+        "point trains other policies) disagree by chance, scattered and of either sign; a "
+        "regression (less training, a changed default) shows as a cluster of disagreements "
+        "of one sign.\n\n" + check_markdown(check) + "\n"
     )
     write_if_changed(out / f"{CHECK_NAME}.csv", check.to_csv(index=False, float_format="%.4f"))
     path = out / f"{CHECK_NAME}.md"

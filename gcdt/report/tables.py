@@ -199,6 +199,18 @@ def wilson_ci(rate: float, n: int) -> tuple[float, float]:
     return float(interval.low), float(interval.high)
 
 
+def _episodes(group: pd.DataFrame, metric: str) -> tuple[float, float, int]:
+    """(mean, standard deviation over episodes, episodes) of the metric of a cell's one run
+    (its first with a value): a success rate's episodes are 0 or 1. The deviation is the
+    evaluation's own (ddof 0; NaN when the run stored none)."""
+    run = group[group[metric].notna()].iloc[0]
+    n = int(run["episodes"])
+    if metric == "success_rate":
+        rate = float(run["success_rate"])
+        return rate, float(np.sqrt(rate * (1 - rate))), n
+    return float(run["mean_return"]), float(run["std_return"]), n
+
+
 def _interval(group: pd.DataFrame, metric: str, scale: float) -> tuple[float, float]:
     """95 % interval of a cell's mean: over seeds (bootstrap) when it has several; with one
     seed, over that run's evaluation episodes (Wilson for success, normal for return), since
@@ -208,25 +220,52 @@ def _interval(group: pd.DataFrame, metric: str, scale: float) -> tuple[float, fl
         return np.nan, np.nan
     if len(values) > 1:
         return bootstrap_ci(values * scale)
-    run = group.iloc[0]
+    mean, std, n = _episodes(group, metric)
     if metric == "success_rate":
-        low, high = wilson_ci(run["success_rate"], int(run["episodes"]))
+        low, high = wilson_ci(mean, n)
     else:
-        half = 1.96 * run["std_return"] / np.sqrt(max(int(run["episodes"]), 1))
-        low, high = run["mean_return"] - half, run["mean_return"] + half
+        half = 1.96 * std / np.sqrt(max(n, 1))
+        low, high = mean - half, mean + half
     return low * scale, high * scale
+
+
+@dataclass(frozen=True)
+class Sample:
+    """What a cell's mean is a mean of, summarised for comparing two runs of the cell: its
+    seeds' values when it has several; with one seed, that run's evaluation episodes (the
+    same choice as the cell's interval)."""
+
+    mean: float
+    std: float  # sample standard deviation (ddof 1); NaN when unknown
+    n: int
+    over: str  # "seeds" or "episodes"
+
+
+def cell_sample(group: pd.DataFrame, metric: str, scale: float) -> Sample | None:
+    """The `Sample` of a cell's `metric` (times `scale`); None when no run has a value."""
+    values = group[metric].dropna().to_numpy(dtype=np.float64) * scale
+    if not len(values):
+        return None
+    if len(values) > 1:
+        return Sample(float(values.mean()), float(values.std(ddof=1)), len(values), "seeds")
+    mean, std, n = _episodes(group, metric)
+    std = std * np.sqrt(n / (n - 1)) if n > 1 else np.nan  # the evaluation's ddof 0 to ddof 1
+    return Sample(mean * scale, std * scale, n, "episodes")
 
 
 #: What `aggregate` gives per group, beside the group's keys.
 _STATS = ("mean", "std", "ci_low", "ci_high")
 AGGREGATES = (*(f"{m}_{s}" for m in ("return", "success") for s in _STATS), "seeds")
+#: What `aggregate` adds with `samples`: each metric's `Sample`.
+SAMPLES = ("return_sample", "success_sample")
 
 
-def aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
+def aggregate(runs: pd.DataFrame, by: list[str], samples: bool = False) -> pd.DataFrame:
     """Per group of `by`: mean, std and 95 % interval of return and success (%), and seeds
-    (no rows, with those columns, when `runs` has none)."""
+    (no rows, with those columns, when `runs` has none); with `samples`, also each metric's
+    `Sample` (columns `SAMPLES`), for comparing two runs of the same cells."""
     if runs.empty:
-        return pd.DataFrame(columns=[*by, *AGGREGATES])
+        return pd.DataFrame(columns=[*by, *AGGREGATES, *(SAMPLES if samples else ())])
     rows = []
     for keys, group in runs.groupby(by, sort=False):
         row = dict(zip(by, keys, strict=True))
@@ -240,6 +279,8 @@ def aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
                 f"{name}_ci_low": low,
                 f"{name}_ci_high": high,
             }
+            if samples:
+                row[f"{name}_sample"] = cell_sample(group, metric, scale)
         row["seeds"] = len(group)
         rows.append(row)
     return pd.DataFrame(rows)
@@ -249,13 +290,14 @@ def aggregate(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
 CURVES = {"fig3_dataset_size": ("rq4", "size"), "fig4_expert_ratio": ("rq5", "expert_ratio")}
 
 
-def curve_table(runs: pd.DataFrame, section: str, x: str) -> pd.DataFrame:
+def curve_table(runs: pd.DataFrame, section: str, x: str, samples: bool = False) -> pd.DataFrame:
     """GC-DT per reward, task and `x` over the runs of `section` (Fig. 3: "rq4", "size";
-    Fig. 4: "rq5", "expert_ratio"), as `aggregate` gives it; empty without such runs."""
+    Fig. 4: "rq5", "expert_ratio"), as `aggregate` gives it (with `samples`, theirs too);
+    empty without such runs."""
     sel = runs[runs["sections"].apply(lambda s: section in s) & (runs["method"] == "gcdt")]
     if sel.empty:
         return pd.DataFrame()
-    table = aggregate(sel, ["reward", "task", x])
+    table = aggregate(sel, ["reward", "task", x], samples)
     order = {task: i for i, task in enumerate(TASK_NAMES)}
     keys = [table["reward"], table["task"].map(order), table[x]]
     return table.iloc[np.lexsort(keys[::-1])].reset_index(drop=True)
@@ -303,10 +345,11 @@ def datasets_table(runs: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame([rows[k] for k in sorted(rows)])
 
 
-def table1(runs: pd.DataFrame) -> pd.DataFrame:
-    """Table 1: per reward, method and task, our mean ± std (and CI) beside the paper's."""
+def table1(runs: pd.DataFrame, samples: bool = False) -> pd.DataFrame:
+    """Table 1: per reward, method and task, our mean ± std (and CI) beside the paper's (with
+    `samples`, `aggregate`'s samples too)."""
     sel = runs[runs["sections"].apply(lambda s: "table1" in s)]
-    table = aggregate(sel, ["reward", "method", "task"])
+    table = aggregate(sel, ["reward", "method", "task"], samples)
     paper = [
         PAPER_TABLE1.get((r.reward, r.method), {}).get(r.task, (np.nan, np.nan))
         for r in table.itertuples()
@@ -316,8 +359,9 @@ def table1(runs: pd.DataFrame) -> pd.DataFrame:
     return _ordered(table, ["dense", "sparse"], ["gcdt", "bc", "tqc"])
 
 
-def ablation_table(runs: pd.DataFrame) -> pd.DataFrame:
-    """GC-DT against DT without goals and DT with the desired goal only, same data."""
+def ablation_table(runs: pd.DataFrame, samples: bool = False) -> pd.DataFrame:
+    """GC-DT against DT without goals and DT with the desired goal only, same data (with
+    `samples`, `aggregate`'s samples too)."""
     full = runs[runs["sections"].apply(lambda s: "ablation" in s or "table1" in s)]
     full = full[full["method"].isin(["gcdt", "dt-desired", "dt"])]
     scoped = full.merge(
@@ -327,7 +371,7 @@ def ablation_table(runs: pd.DataFrame) -> pd.DataFrame:
         on=["task", "reward"],
     )
     return _ordered(
-        aggregate(scoped, ["reward", "method", "task"]),
+        aggregate(scoped, ["reward", "method", "task"], samples),
         ["dense", "sparse"],
         ["gcdt", "dt-desired", "dt"],
     )

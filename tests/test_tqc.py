@@ -560,7 +560,7 @@ def test_a_snapshot_resumes_on_a_fresh_folder_and_refills_its_buffer(
     [
         ("no checkpoint", "holds no TQC+HER checkpoint: snapshot a run in progress"),
         ("run folder", "is a run's folder, not a snapshot"),
-        ("other run", "a checkpoint of reward 'sparse', not 'dense'"),
+        ("other run", "a checkpoint of reward 'dense', not 'sparse'"),
         ("later snapshot", "holds a later snapshot of this run"),
         ("not a snapshot", "exists and is not a run's snapshot"),
     ],

@@ -120,12 +120,12 @@ def load_checkpoint(path: Path, model: Any) -> Any:
     if buffer is None:
         # The transitions stayed behind: the run refills an empty buffer as it began, with
         # random steps (SB3 acts at random below `learning_starts`) before its next update.
-        buffer = model.replay_buffer = fresh_buffer
+        model.replay_buffer = fresh_buffer  # built on `envs`
         model.learning_starts = model.num_timesteps + warm_up
     else:
         _fill_buffer(buffer)
-    if hasattr(buffer, "set_env"):  # HER recomputes rewards through the envs
-        buffer.set_env(envs)
+        if hasattr(buffer, "set_env"):  # HER recomputes rewards through the envs
+            buffer.set_env(envs)
     for env, state in zip(_seeded(envs), payload["envs"], strict=True):
         env.restore_replay_state(state)
     model._last_obs = _vec_observation(envs)

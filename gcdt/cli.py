@@ -661,9 +661,10 @@ class TQCPublish(_Command):
 class TQCSnapshot(_Command):
     """keep a TQC+HER run in progress in a few MiB, to resume on another machine
 
-    Write the run's checkpoint without its replay buffer, its curve and its best model to
-    --out, replacing an older snapshot of the same run. Copy them into a run folder and resume
-    with gcdt tqc train --resume: the run refills its buffer and records that it did."""
+    Write the run's checkpoint without its replay buffer, and its curve, to --out, replacing
+    an older snapshot of the same run. Copy them into a run folder and resume with gcdt tqc
+    train --resume: the run refills its buffer, records that it did, and finds its best model
+    again from the next evaluation on."""
 
     name = "tqc snapshot"
     run_dir: Path = setting(

@@ -522,9 +522,9 @@ def test_a_killed_run_resumes_and_finishes_as_one_run(checkpointed, tmp_path):
 def test_a_snapshot_resumes_on_a_fresh_folder_and_refills_its_buffer(
     checkpointed, tmp_path, capsys
 ):
-    """`gcdt tqc snapshot`: the checkpoint without its buffer (a fraction of its size), the
-    curve and the best model; a fresh folder resumes from it, records the refill, and takes
-    no gradient step before `learning_starts` new random steps have refilled the buffer."""
+    """`gcdt tqc snapshot`: the checkpoint without its buffer (a fraction of its size) and the
+    curve; a fresh folder resumes from it, records the refill, and takes no gradient step
+    before `learning_starts` new random steps have refilled the buffer."""
     from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE, has_buffer, read_header
 
     snap = tmp_path / "snap"
@@ -534,17 +534,15 @@ def test_a_snapshot_resumes_on_a_fresh_folder_and_refills_its_buffer(
     assert f"at {steps:,} env steps" in capsys.readouterr().out
     assert has_buffer(full) and not has_buffer(kept) and steps == full["env_steps"]
     assert (snap / CHECKPOINT_FILE).stat().st_size < (checkpointed / CHECKPOINT_FILE).stat().st_size
-    assert sorted(p.name for p in snap.iterdir()) == [
-        "best_model.zip",
-        "checkpoint.tqc",
-        "eval.csv",
-    ]
+    assert sorted(p.name for p in snap.iterdir()) == ["checkpoint.tqc", "eval.csv"]
     # Another machine: only the snapshot's files in the run's folder.
     out = tmp_path / "elsewhere"
     shutil.copytree(snap, out)
     assert main(_reach_argv(out, "--resume", "--checkpoint-seconds", "3600")) == 0
     record = json.loads((out / "run.json").read_text())
     assert record["env_steps"] == 1600 and record["buffer_refills"] == [steps]
+    # The best model stayed behind: it is found again after the resume, zip and record alike.
+    assert record["best"]["env_steps"] == 1600 and (out / "best_model.zip").is_file()
     # 1000 warm-up steps from `steps` (> 1100) pass the 1,600-step budget: no gradient step
     # after the resume, so the final weights are the snapshot's.
     from gcdt.baselines.tqc_checkpoint import _read

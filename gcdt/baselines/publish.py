@@ -14,8 +14,9 @@ when asked (`replace`), and then in one swap: readers see the old agent or the n
 
 A 1M-step run outlasts a working session, and a session may end on another machine than the
 next one starts on. `gcdt tqc snapshot RUN_DIR` keeps what the run needs to carry on there, in
-a few MiB the repository can hold: its checkpoint without the replay buffer (`strip_buffer`),
-its curve and its best model. Copied into a run folder, `--resume` continues from it.
+a few MiB the repository can hold: its checkpoint without the replay buffer (`strip_buffer`)
+and its curve; not its best model (as large again), whose count starts afresh on the resume.
+Copied into a run folder, `--resume` continues from it.
 """
 
 from __future__ import annotations
@@ -200,7 +201,7 @@ def snapshot_dir(task: str, reward: str, seed: int, root: str | Path = SNAPSHOTS
 
 def snapshot_run(run: str | Path, out: str | Path | None = None) -> tuple[Path, dict[str, Any]]:
     """Snapshot the run in progress in `run` (default folder: `snapshot_dir`): its checkpoint
-    without the replay buffer, `eval.csv` and `best_model.zip`. An older snapshot of the same
+    without the replay buffer, and `eval.csv`. An older snapshot of the same
     run is replaced in one swap; anything else in `out` is refused. Returns the folder and the
     snapshot's checkpoint header."""
     run = Path(run)
@@ -227,11 +228,8 @@ def snapshot_run(run: str | Path, out: str | Path | None = None) -> tuple[Path, 
             )
     with _built_whole(out) as staging:
         kept = strip_buffer(run / CHECKPOINT_FILE, staging / CHECKPOINT_FILE)
-        # The curve and best model may run ahead of the checkpoint: a resume rewrites the
-        # curve to the checkpoint's, and publishing measures the best model again anyway.
-        for name in (EVAL_CSV, BEST_MODEL_ZIP):
-            if (run / name).is_file():
-                shutil.copyfile(run / name, staging / name)
+        # The curve may run ahead of the checkpoint: a resume rewrites it to the checkpoint's.
+        shutil.copyfile(run / EVAL_CSV, staging / EVAL_CSV)
     return out, kept
 
 

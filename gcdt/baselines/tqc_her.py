@@ -355,6 +355,10 @@ class _Run:
             model.gcdt = saved["gcdt"]
             clock.set_state(saved["clock"])
             evaluator.set_state(saved["evaluation"])
+            if not (out / BEST_MODEL_ZIP).is_file():
+                # The best model did not travel (a snapshot leaves it out): the best is found
+                # again from the next evaluation on, so the zip and its record always agree.
+                evaluator.best, evaluator.best_row = (-np.inf, -np.inf), None
             run.resumes = saved["resumes"] + 1
             run.buffer_refills = saved.get("buffer_refills", [])
             if not buffer:

@@ -12,6 +12,7 @@ and a result file can be matched to exactly the config that produced it.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -22,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 from gcdt import paper
 from gcdt.baselines.tqc_her import TQCConfig, load_tqc_config
 from gcdt.errors import GcdtError
-from gcdt.experiments.profiles import EVAL_SEED_STEP, SECTION_ORDER, Profile, target_seeds
+from gcdt.experiments.profiles import EVAL_SEED_STEP, SECTIONS, Profile, target_seeds
 from gcdt.methods import OFFLINE_METHODS
 from gcdt.paths import REPO_ROOT
 from gcdt.policies import TQC_PREFIX
@@ -36,7 +37,6 @@ if TYPE_CHECKING:
 #: on 8 envs (tqc_her.yaml's loop values); episode seeds come from one stream per purpose;
 #: BC's budget follows `Profile.bc_budget`. 5: faster scripted experts (shorter episodes).
 RUN_SCHEMA = 5
-SECTIONS = SECTION_ORDER
 #: A published agent's digest while the agent a profile names is not published yet (or is not
 #: of the profile's `agent_steps`): the data it would collect, and every run on it, wait.
 PENDING = "pending"
@@ -340,7 +340,15 @@ def file_digest(path: Path) -> str:
     """The content hash of a published file the grid depends on (16 hex digits)."""
     if not path.is_file():
         raise GcdtError(f"no published expert agent at {path}: fix the profile's expert_agents")
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    stat = path.stat()
+    return _digest(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=64)
+def _digest(path: str, mtime_ns: int, size: int) -> str:
+    # Every data spec of a task asks for its agent's hash: read the file once per version
+    # of it (a replaced agent has another mtime or size, and is hashed again).
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
 def bc_steps(profile: Profile, task: str, data: DataSpec) -> int | None:

@@ -47,7 +47,7 @@ def target_seeds(seed: int) -> tuple[int, int]:
 
 ALL_REWARDS = tuple(REWARDS)
 #: The grid's sections (`gcdt sweep --only`), in the order a sweep runs them by default.
-SECTION_ORDER = ("table1", "budget", "rq4", "rq5", "ablation", "targets", "generalisation")
+SECTIONS = ("table1", "budget", "rq4", "rq5", "ablation", "targets", "generalisation")
 
 
 @dataclass(frozen=True)
@@ -138,7 +138,7 @@ class Profile:
     budget: Scope = Scope(tasks=())
     budget_factor: int = 4
     # The order the sweep starts the sections in: what a budget that runs out keeps.
-    section_order: tuple[str, ...] = SECTION_ORDER
+    section_order: tuple[str, ...] = SECTIONS
     # Resources of one run: CPU threads, and the GPU share under Ray (4 runs per GPU).
     cpus_per_run: int = 1
     gpus_per_run: float = 0.25
@@ -183,10 +183,10 @@ class Profile:
             raise GcdtError(
                 f"profile {self.name!r}: expert_noise must be >= 0, got {self.expert_noise!r}"
             )
-        if sorted(self.section_order) != sorted(SECTION_ORDER):
+        if sorted(self.section_order) != sorted(SECTIONS):
             raise GcdtError(
                 f"profile {self.name!r}: section_order must order every section once "
-                f"({', '.join(SECTION_ORDER)}), got {self.section_order!r}"
+                f"({', '.join(SECTIONS)}), got {self.section_order!r}"
             )
         if self.tqc_agents and self.table1_tqc.tasks:
             raise GcdtError(

@@ -26,7 +26,7 @@ import json
 import shutil
 import tempfile
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -191,6 +191,8 @@ def publish_agent(
         write_json_atomic(staging / RUN_JSON, {**record, "curve": curve, "published": published})
     snapshots = out.parent / SNAPSHOTS_DIR.name
     shutil.rmtree(snapshot_dir(task, reward, record["seed"], snapshots), ignore_errors=True)
+    with suppress(OSError):
+        snapshots.rmdir()  # the last run in progress is finished: no empty folder is left
     return out
 
 

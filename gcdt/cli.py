@@ -619,6 +619,11 @@ class TQCTrain(_Command, _Progress):
         return 0
 
 
+def _tqc_run_dir(which: str) -> Any:
+    """The RUN_DIR argument of the commands that read a `gcdt tqc train` run's folder."""
+    return setting(REQUIRED, f"the --out folder of {which}", metavar="RUN_DIR", positional=True)
+
+
 @dataclass(frozen=True, kw_only=True)
 class TQCPublish(_Command):
     """publish a finished TQC+HER run as an agent in results/experts/
@@ -628,12 +633,7 @@ class TQCPublish(_Command):
     to --out. An agent already there is replaced only with --replace, in one swap."""
 
     name = "tqc publish"
-    run_dir: Path = setting(
-        REQUIRED,
-        "the --out folder of a finished gcdt tqc train run",
-        metavar="RUN_DIR",
-        positional=True,
-    )
+    run_dir: Path = _tqc_run_dir("a finished gcdt tqc train run")
     out: Path | None = setting(
         None, "the agent's folder (default: results/experts/tqc_TASK_REWARD)", metavar="DIR"
     )
@@ -667,12 +667,7 @@ class TQCSnapshot(_Command):
     again from the next evaluation on."""
 
     name = "tqc snapshot"
-    run_dir: Path = setting(
-        REQUIRED,
-        "the --out folder of a gcdt tqc train run in progress",
-        metavar="RUN_DIR",
-        positional=True,
-    )
+    run_dir: Path = _tqc_run_dir("a gcdt tqc train run in progress")
     out: Path | None = setting(
         None,
         "the snapshot's folder (default: results/experts/in_progress/tqc_TASK_REWARD_seedS)",

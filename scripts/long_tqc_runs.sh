@@ -18,9 +18,10 @@ if [ "${1:-}" = "--snapshot" ]; then
   exit 0
 fi
 runs=("$@")
-# The sparse experts first (the large profile's data waits for them), then Table 1's dense cells.
+# The large profile's experts first (its data waits for them; PickAndPlace's is the dense
+# agent), then the rest of Table 1's TQC+HER cells.
 [ ${#runs[@]} -gt 0 ] ||
-  runs=(pick_and_place:sparse push:sparse reach:sparse push:dense pick_and_place:dense reach:dense)
+  runs=(push:sparse pick_and_place:dense reach:sparse pick_and_place:sparse push:dense reach:dense)
 for run in "${runs[@]}"; do
   task="${run%%:*}" reward="${run##*:}" out="$ROOT/${task}_${reward}"
   [ -f "$out/run.json" ] && continue                                  # finished here

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Issue 42's long TQC+HER runs (1M env steps, cpu config, sbx loop, seed 0), one after the
-# other, each started or resumed from its checkpoint: re-run this script after any stop.
+# other, each started or resumed from its checkpoint and published when it finishes: re-run
+# this script after any stop.
 # Usage: nohup scripts/long_tqc_runs.sh [task:reward ...] >> artifacts/long_tqc_runs.log 2>&1 &
 #        scripts/long_tqc_runs.sh --snapshot   (before a session ends: commit what it writes)
 # With no arguments it walks every run; two instances given disjoint lists use both cores
@@ -11,6 +12,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT="${GCDT_ARTIFACTS:-artifacts}/long_tqc"
 SEED=0
+STEPS="${GCDT_LONG_TQC_STEPS:-1000000}"   # a smaller value: a rehearsal of the whole script
 if [ "${1:-}" = "--snapshot" ]; then
   for out in "$ROOT"/*/; do
     [ -f "$out/checkpoint.tqc" ] && .venv/bin/gcdt tqc snapshot "$out"
@@ -24,16 +26,23 @@ runs=("$@")
   runs=(push:sparse pick_and_place:dense reach:sparse pick_and_place:sparse push:dense reach:dense)
 for run in "${runs[@]}"; do
   task="${run%%:*}" reward="${run##*:}" out="$ROOT/${task}_${reward}"
-  [ -f "$out/run.json" ] && continue                                  # finished here
   agent="results/experts/tqc_${task}_${reward}/run.json"                # finished and published
   [ -f "$agent" ] && .venv/bin/python -c 'import json, sys
-sys.exit(json.load(open(sys.argv[1]))["env_steps"] < 1_000_000)' "$agent" && continue
-  snapshot="results/experts/in_progress/tqc_${task}_${reward}_seed${SEED}"
-  if [ ! -f "$out/checkpoint.tqc" ] && [ -f "$snapshot/checkpoint.tqc" ]; then
-    mkdir -p "$out" && cp "$snapshot"/* "$out"/
+sys.exit(json.load(open(sys.argv[1]))["env_steps"] < int(sys.argv[2]))' "$agent" "$STEPS" && continue
+  if [ ! -f "$out/run.json" ]; then                                   # not finished here
+    snapshot="results/experts/in_progress/tqc_${task}_${reward}_seed${SEED}"
+    if [ ! -f "$out/checkpoint.tqc" ] && [ -f "$snapshot/checkpoint.tqc" ]; then
+      mkdir -p "$out" && cp "$snapshot"/* "$out"/
+    fi
+    resume=()
+    [ -f "$out/checkpoint.tqc" ] && resume=(--resume)
+    .venv/bin/gcdt tqc train --task "$task" --reward "$reward" --config cpu --steps "$STEPS" \
+      --seed "$SEED" --eval-every 25000 --eval-episodes 100 --out "$out" --no-progress "${resume[@]}"
   fi
-  resume=()
-  [ -f "$out/checkpoint.tqc" ] && resume=(--resume)
-  .venv/bin/gcdt tqc train --task "$task" --reward "$reward" --config cpu --steps 1000000 \
-    --seed "$SEED" --eval-every 25000 --eval-episodes 100 --out "$out" --no-progress "${resume[@]}"
+  # Publish it at once (replacing an agent of fewer steps, and the run's snapshot): the large
+  # profile's runs that wait for it can start; commit results/experts/ afterwards.
+  replace=()
+  [ -f "$agent" ] && replace=(--replace)
+  .venv/bin/gcdt tqc publish "$out" "${replace[@]}" ||
+    echo "long_tqc_runs: publishing $out failed; run gcdt tqc publish $out by hand" >&2
 done

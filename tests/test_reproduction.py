@@ -92,6 +92,7 @@ def test_a_shifted_cell_disagrees_and_the_interval_is_welchs(published_and_ours)
     line = reproduction.summary_line(check.reset_index())
     assert line.startswith(f"{len(check) - 1} of {len(check)} values agree: the 95 % interval")
     assert "contains 0" in line and "1 in 20" in line
+    assert line.endswith("(values counted as independent): as expected of an honest re-run.")
     text, path = reproduction.write_check(PROFILE, ours, published)
     assert "(Welch's t interval), contains 0" in text and "1 in 20" in text
     assert "| -30.00 % | " not in text and "| 30.00 % | -30.00 [" in text
@@ -208,6 +209,28 @@ def test_one_seed_cells_get_an_interval_from_their_episodes():
     low, high = tables.wilson_ci(0.9, 200)
     assert 0.84 < low < 0.9 < high < 0.94
     assert tables.wilson_ci(1.0, 100)[1] == pytest.approx(1.0)
+
+
+def test_the_summary_tells_chance_disagreements_from_a_regression():
+    """One value in 20 disagrees by chance; four of eight (a halved training budget, say) is
+    too many for chance, and the summary says so; missing values are not counted."""
+
+    def check(disagree: int, values: int, missing: int = 0) -> pd.DataFrame:
+        agrees = [False] * (disagree + missing) + [True] * (values - disagree)
+        ours = [np.nan] * missing + [1.0] * (disagree + values - disagree)
+        return pd.DataFrame({"metric": "success", "agrees": agrees, "ours": ours})
+
+    assert reproduction.chance_of_as_many(0, 8) == 1.0
+    assert reproduction.chance_of_as_many(1, 1) == pytest.approx(0.05)
+    assert reproduction.chance_of_as_many(4, 8) == pytest.approx(stats.binom.sf(3, 8, 0.05))
+    assert "by chance with probability" not in reproduction.summary_line(check(0, 8))
+    line = reproduction.summary_line(check(2, 40))
+    assert "2 or more of 40 disagree by chance with probability 0.6" in line
+    assert line.endswith("as expected of an honest re-run.")
+    line = reproduction.summary_line(check(4, 8, missing=3))
+    assert line.startswith("4 of 11 values agree") and "missing: 3" in line
+    assert "4 or more of 8 disagree by chance with probability 0.00037" in line
+    assert line.endswith("look for a regression (less training, a changed default).")
 
 
 def test_missing_runs_are_reported_and_never_agree(published_and_ours):

@@ -152,15 +152,43 @@ def check_markdown(check: pd.DataFrame) -> str:
     return "\n".join(lines) + "\n\n" + summary_line(check)
 
 
+#: Below this chance of as many disagreements in an honest re-run, the summary says to look
+#: for a regression.
+SUSPECT = 0.01
+
+
+def chance_of_as_many(disagree: int, values: int) -> float:
+    """The probability that an honest re-run disagrees on `disagree` or more of `values`
+    values, each disagreeing with probability 1 - LEVEL on its own (binomial tail)."""
+    return float(stats.binom.sf(disagree - 1, values, 1 - LEVEL)) if disagree else 1.0
+
+
 def summary_line(check: pd.DataFrame) -> str:
-    """How many values agree, what agreeing means, and how many disagree by chance."""
+    """How many values agree, what agreeing means, how many disagree by chance, and whether
+    as many disagreements as these are likely by chance at all."""
     success = check[check["metric"] == "success"]
-    return (
+    compared = check[check["ours"].notna()]
+    disagree = int((~compared["agrees"].astype(bool)).sum())
+    line = (
         f"{int(check['agrees'].sum())} of {len(check)} values agree: the {_level()} interval "
         "of the difference of means (ours - published), from both runs' seed spread (Welch), "
         f"contains 0 (success rates: {int(success['agrees'].sum())} of {len(success)}; "
         f"missing: {int(check['ours'].isna().sum())}). At that level about {_chance()} values "
         "of an honest re-run disagree by chance."
+    )
+    if not disagree:
+        return line
+    # Values are not quite independent (a cell's success and return move together), so the
+    # tail is a guide, not a test of its own.
+    chance = chance_of_as_many(disagree, len(compared))
+    verdict = (
+        "look for a regression (less training, a changed default)"
+        if chance < SUSPECT
+        else "as expected of an honest re-run"
+    )
+    return (
+        f"{line} {disagree} or more of {len(compared)} disagree by chance with probability "
+        f"{chance:.2g} (values counted as independent): {verdict}."
     )
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 import sys
 import time
@@ -37,6 +38,10 @@ from gcdt.report import tables
 from gcdt.report.reproduction import check_markdown, reproduction_check, summary_line
 
 OUT = REPO_ROOT / "results" / "quick_checks" / "reproduction_trial"
+
+
+def _run_seconds(path: Path) -> float:
+    return json.loads(path.read_text())["execution"]["seconds"]["total_seconds"]
 
 
 def main() -> None:
@@ -55,7 +60,7 @@ def main() -> None:
 
     published = get_profile(args.profile)
     if published.train_steps is None:
-        sys.exit(f"error: profile {args.profile!r} trains for epochs, not steps: no budget to scale")
+        sys.exit(f"error: profile {args.profile!r} trains for epochs, not steps: nothing to scale")
     steps = {t: max(1, round(s * args.budget_scale)) for t, s in published.train_steps.items()}
     trial = dataclasses.replace(
         published,
@@ -79,13 +84,16 @@ def main() -> None:
         sys.exit(f"error: {len(summary.failed)} runs failed: {summary.rerun}")
 
     ours = tables.load_runs(trial, runs_dir, agents=False)
-    mine = tables.load_runs(published, results_dir(published.name, REPO_ROOT) / "runs", agents=False)
-    check = reproduction_check(mine, ours)
+    published_runs = results_dir(published.name, REPO_ROOT) / "runs"
+    check = reproduction_check(tables.load_runs(published, published_runs, agents=False), ours)
     check = check[check["ours"].notna()].reset_index(drop=True)  # the slice's items only
     capability = torch.backends.cpu.get_cpu_capability()
     command = " ".join(
-        ([f"ATEN_CPU_CAPABILITY={os.environ['ATEN_CPU_CAPABILITY']}"]
-         if os.environ.get("ATEN_CPU_CAPABILITY") else [])
+        (
+            [f"ATEN_CPU_CAPABILITY={os.environ['ATEN_CPU_CAPABILITY']}"]
+            if os.environ.get("ATEN_CPU_CAPABILITY")
+            else []
+        )
         + ["python", "scripts/quick_checks/reproduction_trial.py", *sys.argv[1:]]
     )
     record = {
@@ -99,8 +107,9 @@ def main() -> None:
         "train_steps": steps,
         "torch_cpu_capability": capability,
         "runs": len(summary.planned),
-        "run_seconds_this_call": round(summary.seconds, 1),
-        "wall_seconds": round(time.time() - began, 1),
+        # The runs' own times, from their files: a second call only re-checks finished runs.
+        "run_seconds": round(sum(_run_seconds(p) for p in runs_dir.glob("*.json")), 1),
+        "wall_seconds_this_call": round(time.time() - began, 1),
         "agree": int(check["agrees"].sum()),
         "values": len(check),
         "summary": summary_line(check),

@@ -20,10 +20,10 @@ if [ "${1:-}" = "--snapshot" ]; then
   exit 0
 fi
 runs=("$@")
-# The large profile's experts first (its data waits for them; PickAndPlace's is the dense
-# agent), then the rest of Table 1's TQC+HER cells.
+# The large profile's experts first (its data waits for them), then the rest of Table 1's
+# TQC+HER cells.
 [ ${#runs[@]} -gt 0 ] ||
-  runs=(push:sparse pick_and_place:dense reach:sparse pick_and_place:sparse push:dense reach:dense)
+  runs=(push:sparse pick_and_place:sparse reach:sparse pick_and_place:dense push:dense reach:dense)
 for run in "${runs[@]}"; do
   task="${run%%:*}" reward="${run##*:}" out="$ROOT/${task}_${reward}"
   agent="results/experts/tqc_${task}_${reward}/run.json"                # finished and published

@@ -88,6 +88,18 @@ def cpu_bf16() -> bool | None:
     return None if flags is None else bool({"avx512_bf16", "amx_bf16"} & set(flags.split()))
 
 
+def numpy_kernels() -> list[str]:
+    """The vector-kernel levels numpy dispatches to on this CPU (e.g. ["X86_V3", "X86_V4"]),
+    those `NPY_DISABLE_CPU_FEATURES` switched off excluded.
+
+    They decide the last bit of some float32 results (reductions such as `np.linalg.norm`), so
+    a scripted expert's actions, and the data it collects, are bit-identical only between
+    CPUs with the same list."""
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
+    return [name for name in __cpu_dispatch__ if __cpu_features__.get(name)]
+
+
 def machine_info() -> dict[str, Any]:
     """Where a measurement ran: CPU model, cores, Python, torch and its device."""
     import torch  # only when asked: provenance is imported by code that needs no torch

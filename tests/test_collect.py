@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -150,14 +154,40 @@ def _push(**kwargs):
     return collect(expert, "push", 150, seed=0, n_envs=2, progress=False, **kwargs)
 
 
+#: The arrays the collector made before collections ran in chunks, for `_push()`'s arguments,
+#: on a CPU where numpy's best kernels were X86_V3 (AVX2); the smoke, quick and standard
+#: datasets (and their manifests' SHA-256s) are such one-chunk collections.
+REFERENCE_KERNELS = "X86_V3"
+REFERENCE_DIGEST = "db65c465081c380dfd9bb35b2834a90b965f2930c12a3be2fe1bf2993b2f2c99"
+_DIGEST_SCRIPT = """
+from test_collect import _digest, _push
+print(_digest(_push()))
+"""
+
+
+def test_the_reference_collection_is_made_again_with_the_reference_kernels():
+    """On any CPU that has the reference's numpy kernels: numpy switched down to them (in a
+    process of its own, env workers included) collects the reference's bytes exactly. Its
+    scripted expert's float32 norms differ in the last bit with AVX-512 kernels."""
+    from gcdt.provenance import numpy_kernels
+
+    kernels = numpy_kernels()
+    if REFERENCE_KERNELS not in kernels:
+        pytest.skip(f"this CPU lacks numpy's {REFERENCE_KERNELS} kernels (it has {kernels})")
+    above = kernels[kernels.index(REFERENCE_KERNELS) + 1 :]
+    env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": " ".join(above)}
+    env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).parent), env.get("PYTHONPATH", "")])
+    out = subprocess.run(
+        [sys.executable, "-c", _DIGEST_SCRIPT], env=env, capture_output=True, text=True
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split()[-1] == REFERENCE_DIGEST
+
+
 def test_a_collection_of_one_chunk_is_the_collection_made_before_chunks(tmp_path):
-    # The arrays the collector made before collections ran in chunks, for these arguments;
-    # the smoke, quick and standard datasets (and their manifests' SHA-256s) are such
-    # one-chunk collections.
-    reference = "db65c465081c380dfd9bb35b2834a90b965f2930c12a3be2fe1bf2993b2f2c99"
     assert 150 < collect_module.CHUNK_TRANSITIONS
     plain = _push()
-    assert _digest(plain) == reference
+    reference = _digest(plain)  # this CPU's; the reference kernels' is checked above
     saved = _push(chunks_dir=tmp_path / "chunks")  # saved as a chunk, and the same
     assert _digest(saved) == reference
     assert [p.name for p in (tmp_path / "chunks").iterdir()] == ["00000.npz"]

@@ -46,7 +46,7 @@ from gcdt.paths import (
     write_if_changed,
     write_json_atomic,
 )
-from gcdt.provenance import git_commit, package_versions
+from gcdt.provenance import git_commit, numpy_kernels, package_versions
 
 MANIFEST_NAME = "datasets.json"
 NAMESPACE = "gcdt"
@@ -521,7 +521,9 @@ def verify(profile: Profile) -> list[str]:
     if problems:
         raise GcdtError(
             f"{len(problems)} file(s) disagree with {path}: {'; '.join(problems)} (rebuild: "
-            f"delete the dataset and run `make datasets PROFILE={profile.name}`)"
+            f"delete the dataset and run `make datasets PROFILE={profile.name}`; data rebuilt "
+            "on a CPU whose numpy kernels differ from the manifest's machine differs in the "
+            f"last bits, see docs/datasets.md: here {' '.join(numpy_kernels()) or 'baseline'})"
         )
     return lines
 
@@ -659,6 +661,14 @@ build into a folder that holds another dataset under the same id.
 - **Bytes.** Building twice gives the same bytes: the manifest holds the SHA-256 of every file
   and `gcdt dataset verify P` checks them (building what is not built yet). Creation times,
   timings and machine-dependent package versions are left out of the metadata for this.
+  The bytes hold on CPUs where numpy dispatches to the same vector kernels: the published
+  manifests were built where the best were AVX2's (`X86_V3`). With AVX-512 kernels the
+  scripted experts' float32 norms differ in the last bit, their actions and so their
+  episodes drift apart, and `verify` reports the files as different (it names this CPU's
+  kernels, `gcdt.provenance.numpy_kernels()`). `NPY_DISABLE_CPU_FEATURES="X86_V4
+  AVX512_ICL"` (the levels above `X86_V3` on your CPU) makes the same bytes again; a test
+  (`tests/test_collect.py`) checks that. Whether data collected by a TQC agent (JAX) keeps
+  its bytes across CPUs is not checked.
 
 ## Loading
 

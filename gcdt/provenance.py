@@ -92,9 +92,9 @@ def numpy_kernels() -> list[str]:
     """The vector-kernel levels numpy dispatches to on this CPU (e.g. ["X86_V3", "X86_V4"]),
     those `NPY_DISABLE_CPU_FEATURES` switched off excluded.
 
-    They decide the last bit of some float32 results (reductions such as `np.linalg.norm`), so
-    a scripted expert's actions, and the data it collects, are bit-identical only between
-    CPUs with the same list."""
+    They decide the last bit of some functions' results (`np.arctan2`, float64 `np.exp`), so a
+    scripted expert's actions, and the data it collects, are bit-identical only between CPUs
+    with the same list."""
     from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
     return [name for name in __cpu_dispatch__ if __cpu_features__.get(name)]

@@ -167,8 +167,8 @@ print(_digest(_push()))
 
 def test_the_reference_collection_is_made_again_with_the_reference_kernels():
     """On any CPU that has the reference's numpy kernels: numpy switched down to them (in a
-    process of its own, env workers included) collects the reference's bytes exactly. Its
-    scripted expert's float32 norms differ in the last bit with AVX-512 kernels."""
+    process of its own, env workers included) collects the reference's bytes exactly. With
+    AVX-512 kernels its scripted expert's `np.arctan2` differs in the last bit."""
     from gcdt.provenance import numpy_kernels
 
     kernels = numpy_kernels()

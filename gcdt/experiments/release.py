@@ -662,9 +662,9 @@ build into a folder that holds another dataset under the same id.
   and `gcdt dataset verify P` checks them (building what is not built yet). Creation times,
   timings and machine-dependent package versions are left out of the metadata for this.
   The bytes hold on CPUs where numpy dispatches to the same vector kernels: the published
-  manifests were built where the best were AVX2's (`X86_V3`). With AVX-512 kernels the
-  scripted experts' float32 norms differ in the last bit, their actions and so their
-  episodes drift apart, and `verify` reports the files as different (it names this CPU's
+  manifests were built where the best were AVX2's (`X86_V3`). With AVX-512 kernels
+  `np.arctan2` in the Push expert differs in the last bit, its actions and so its episodes
+  drift apart, and `verify` reports the files as different (it names this CPU's
   kernels, `gcdt.provenance.numpy_kernels()`). `NPY_DISABLE_CPU_FEATURES="X86_V4
   AVX512_ICL"` (the levels above `X86_V3` on your CPU) makes the same bytes again; a test
   (`tests/test_collect.py`) checks that. Whether data collected by a TQC agent (JAX) keeps

@@ -5,11 +5,12 @@ profile's Table 1 again, as `make reproduce` runs it, and check it against the p
         --outputs DIR [--profile quick] [--tasks push] [--rewards sparse dense]
         [--methods gcdt bc] [--budget-scale 0.5] [--workers 2]
 
-Two trials, one per question:
+Trials, one per question:
 
-* another CPU: `ATEN_CPU_CAPABILITY=default` makes PyTorch run its generic kernels instead of
-  this CPU's vectorised (AVX2) ones, as a CPU with other vector units (AVX-512) runs others:
-  other rounding, so other weights and other policies from the same code and data;
+* another CPU: run it on one with other vector units than the published run's machine (the
+  published quick run: AVX2), or emulate one with `ATEN_CPU_CAPABILITY=default`, which makes
+  PyTorch run its generic kernels instead of this CPU's vectorised ones: other rounding, so
+  other weights and other policies from the same code and data;
 * a regression: `--budget-scale 0.5` halves the offline training budget (GC-DT's steps, and
   BC's by the equal-samples rule), a change the check must flag.
 
@@ -118,7 +119,8 @@ def main() -> None:
     text = (
         f"# Reproduction trial `{args.name}`\n\n"
         f"Profile `{args.profile}`'s Table 1 on {', '.join(args.tasks)} × "
-        f"{', '.join(args.rewards)}, methods {', '.join(args.methods)}, 3 seeds each, run "
+        f"{', '.join(args.rewards)}, methods {', '.join(args.methods)}, "
+        f"{len(published.seeds)} seeds each, run "
         f"again with PyTorch's `{capability}` kernels and {args.budget_scale:g} times the "
         f"training budget ({steps}), against the published runs (`results/{args.profile}/`).\n\n"
         f"Command: `{command}` (commit {(record['git_commit'] or 'unknown')[:7]}).\n\n"

@@ -182,6 +182,35 @@ def test_directions_across_profiles_set_each_profiles_answer_side_by_side(runs, 
     assert text.splitlines()[-1].startswith(last)
 
 
+def test_a_grid_still_running_shows_only_its_whole_cells_and_says_how_far_it_got(
+    runs, monkeypatch
+):
+    """A cell missing a seed, or a curve missing a point, is not read from what is there: a
+    profile half-way through its grid must not publish a mean of fewer seeds than planned."""
+    push_bc_seed2 = (runs["method"] == "bc") & (runs["task"] == "push") & (runs["seed"] == 2)
+    smallest = runs["size"] == min(PROFILE.rq4_sizes)
+    rq4_smallest = runs["sections"].apply(lambda s: s == ("rq4",)) & smallest
+    running = runs[~push_bc_seed2 & ~rq4_smallest]
+    monkeypatch.setattr(tables, "load_runs", lambda profile, runs_dir=None: running)
+    table = tables.directions_across([PROFILE]).set_index("comparison")
+    whole = tables.directions(runs).set_index("comparison")
+    assert "GC-DT vs BC, Push sparse" in whole.index
+    assert "GC-DT vs BC, Push sparse" not in table.index  # 2 of its 3 seeds only
+    assert table.loc["GC-DT vs BC, Reach sparse", PROFILE.name] == (
+        whole.loc["GC-DT vs BC, Reach sparse", "ours"],
+        bool(whole.loc["GC-DT vs BC, Reach sparse", "agrees"]),
+    )
+    assert not any(c.startswith("RQ4") for c in table.index)  # its smallest subset is missing
+    assert any(c.startswith("RQ5") for c in table.index)
+    planned = len(build_grid(PROFILE))
+    head = tables.directions_across_markdown([PROFILE]).splitlines()[0]
+    assert head == f"| comparison | paper | `report-test` ({len(running)} of {planned} runs) |"
+    monkeypatch.setattr(tables, "load_runs", lambda profile, runs_dir=None: runs)
+    assert tables.directions_across_markdown([PROFILE]).startswith(
+        "| comparison | paper | `report-test` |"
+    )
+
+
 @pytest.mark.parametrize(("longer", "within"), [(0.53, True), (0.9, False)])
 def test_budget_check_sets_the_longer_run_against_the_budget_runs_interval(
     tmp_path, longer, within

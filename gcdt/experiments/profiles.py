@@ -303,8 +303,8 @@ LARGE = dataclasses.replace(
     name="large",
     description="the paper's data and evaluation on a 2-core CPU: Table 1 on every task and "
     "reward, Fig. 4 and Fig. 3 with sparse rewards, on 1M-transition data from 1M-step "
-    "TQC+HER experts (PickAndPlace: the scripted expert); offline training for a fixed budget, checked against one 4 times longer; "
-    "TQC+HER from the published 1M-step agents",
+    "TQC+HER experts (PickAndPlace: the scripted expert); offline training for a fixed "
+    "budget, checked against one 4 times longer; TQC+HER from the published 1M-step agents",
     # The experts: the published sparse-reward agents of 1M online steps (results/experts/,
     # trained by scripts/long_tqc_runs.sh); runs whose agent is not published yet wait for it.
     # PickAndPlace's agent fell far short of an expert at 1M steps, so that task's data comes

@@ -489,14 +489,15 @@ def _sign(diff: float) -> str:
     return "equal" if abs(diff) < EQUAL_POINTS else "higher" if diff > 0 else "lower"
 
 
-def directions(runs: pd.DataFrame) -> pd.DataFrame:
+def directions(runs: pd.DataFrame, profile: Profile | None = None) -> pd.DataFrame:
     """Every comparison the paper's results make, with the paper's answer and ours.
 
     Table 1: GC-DT against BC and TQC+HER, per task and reward (success rate, points).
     RQ4 / RQ5: whether GC-DT's success is lower at the smallest subset than on all the data,
     and at 0 % expert than at 100 %. `agrees` is whether both point the same way (differences
     under EQUAL_POINTS count as equal); with one seed and a short evaluation, a difference of
-    one episode can be several points.
+    one episode can be several points. With `profile`, a curve missing any of its subset
+    sizes or expert shares (a grid still running) is left out rather than read from its ends.
     """
     rows = []
     table = table1(runs).set_index(["reward", "method", "task"])
@@ -520,9 +521,12 @@ def directions(runs: pd.DataFrame) -> pd.DataFrame:
         curve = curve_table(runs, section, x)
         if curve.empty:
             continue
+        planned = {"rq4": profile.rq4_sizes, "rq5": profile.rq5_ratios}[section] if profile else ()
         for (reward, task), cell in curve.groupby(["reward", "task"], sort=False):
             means = cell.set_index(x)["success_mean"]  # sorted by x
             if section == "rq5" and not {0.0, 1.0} <= set(means.index):
+                continue
+            if not set(planned) <= set(means.index):
                 continue
             diff = means.iloc[0] - means.iloc[-1]
             lower, claim = _paper_trend(section, task)
@@ -561,24 +565,47 @@ def directions_markdown(runs: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+#: What makes a grid cell, beside its seed: runs that differ only in their seed share one.
+CELL = ["method", "task", "reward", "size", "expert_ratio", "train_steps", "target_return",
+        "eval_region", "train_region"]  # fmt: skip
+
+
+def complete_cells(runs: pd.DataFrame, profile: Profile) -> pd.DataFrame:
+    """The rows of `runs` whose cell has every one of `profile`'s seeds (a published agent's
+    row stands alone): a grid still running publishes no mean of fewer seeds than planned."""
+    grid = ~runs["key"].str.startswith(AGENT_KEY)
+    seeds = runs[grid].groupby(CELL, dropna=False)["seed"].transform("nunique")
+    whole = pd.Series(True, index=runs.index)
+    whole[grid] = seeds >= len(profile.seeds)
+    return runs[whole]
+
+
 def directions_across(profiles: list[Profile]) -> pd.DataFrame:
     """`directions` of every profile in `profiles` with published runs, side by side: one row
     per comparison, the paper's answer, then per profile ours, or None where that profile
-    does not make the comparison. So a reader sees which disagreements go away at scale."""
-    tables = {}
+    does not make the comparison (or has not finished every seed of its cells). So a reader
+    sees which disagreements go away at scale."""
+    tables, partial = {}, {}
     for profile in profiles:
         try:
-            table = directions(load_runs(profile))
+            finished = load_runs(profile)
         except GcdtError:
             continue  # nothing published for this profile yet
+        runs = complete_cells(finished, profile)
+        table = directions(runs, profile) if not runs.empty else pd.DataFrame()
         if not table.empty:  # runs, but none of the comparisons (a section alone)
             tables[profile.name] = table.set_index("comparison")
+            done = int((~finished["key"].str.startswith(AGENT_KEY)).sum())
+            if done < len(build_grid(profile)):  # a grid still running: the header says so
+                partial[profile.name] = (done, len(build_grid(profile)))
     rows: dict[str, dict] = {}
     for name, table in tables.items():
         for comparison, row in table.iterrows():
             cell = rows.setdefault(comparison, {"comparison": comparison, "paper": row["paper"]})
             cell[name] = (row["ours"], bool(row["agrees"]))
-    return pd.DataFrame(list(rows.values()), columns=["comparison", "paper", *tables])
+    out = pd.DataFrame(list(rows.values()), columns=["comparison", "paper", *tables])
+    out.attrs["partial"] = partial  # profile -> (finished runs, planned runs)
+    return out
 
 
 def directions_across_markdown(profiles: list[Profile]) -> str:
@@ -587,8 +614,13 @@ def directions_across_markdown(profiles: list[Profile]) -> str:
     names = list(table.columns[2:])
     if not names:
         return "*No profile has published the runs these comparisons need.*"
+    partial = table.attrs.get("partial", {})
+    heads = [
+        f"`{n}`" + (f" ({partial[n][0]} of {partial[n][1]} runs)" if n in partial else "")
+        for n in names
+    ]
     lines = [
-        "| comparison | paper | " + " | ".join(f"`{n}`" for n in names) + " |",
+        "| comparison | paper | " + " | ".join(heads) + " |",
         "|---|---|" + "---|" * len(names),
     ]
     for row in table.itertuples(index=False):

@@ -13,11 +13,13 @@ training step (forward, masked MSE, backward, clip 0.25, AdamW) of the paper's c
   is not installed (environment/requirements.txt pins it).
 Both step on the very same batches, drawn beforehand by gcdt's sampler, whose own cost is
 reported as its share of gcdt's step. Data: a PickAndPlace-shaped dataset of 1,000 50-step
-episodes (19 % of a window's tokens are left padding), and for the `*_short` cells one of
+episodes (19 % of a window's tokens are left padding); for the `*_short` cells one of
 13-step episodes, the length of the quick profile's scripted PickAndPlace episodes (63 %
-padding, which gcdt skips and HF computes). Cells run interleaved, each gcdt cell beside its
-HF twin; a cell's time is the median of the repeats, the speed-up the median of the repeats'
-paired ratios.
+padding, which gcdt skips and HF computes); for the `*_tqc` cells one whose episode lengths are
+drawn from those of the published Push TQC+HER expert (`--tqc-agent`), which collects the
+`large` profile's data, measured here on its first 10,000 collected transitions. Cells run
+interleaved, each gcdt cell beside its HF twin; a cell's time is the median of the repeats,
+the speed-up the median of the repeats' paired ratios.
 """
 
 from __future__ import annotations
@@ -36,13 +38,18 @@ from gcdt.data import from_episodes
 from gcdt.device import resolve_device
 from gcdt.envs import compute_rewards
 from gcdt.models import BCConfig, DTConfig
+from gcdt.paths import REPO_ROOT
 from gcdt.training import TrainConfig, WindowSampler, keep_freed_memory, make_optimizer, train_step
 
 
-def _dataset(episodes: int = 1000, length: int = 50):
+def _dataset(episodes: int = 1000, length: int = 50, lengths: np.ndarray | None = None):
+    """Random PickAndPlace-shaped episodes of `length` steps, or of lengths drawn from
+    `lengths`."""
     rng = np.random.default_rng(0)
     eps = []
     for e in range(episodes):
+        if lengths is not None:
+            length = int(rng.choice(lengths))
         goal = rng.normal(size=3).astype(np.float32)
         ag = rng.normal(size=(length + 1, 3)).astype(np.float32)
         r = compute_rewards(ag[1:], np.repeat(goal[None], length, 0), "pick_and_place")
@@ -66,6 +73,16 @@ def _dataset(episodes: int = 1000, length: int = 50):
             }
         )
     return from_episodes("pick_and_place", eps, {"source": "benchmark"})
+
+
+def _agent_lengths(agent: str, task: str = "push", transitions: int = 10_000) -> np.ndarray:
+    """Episode lengths of the first `transitions` steps the published agent collects."""
+    from gcdt.data import collect
+    from gcdt.policies import make_policy
+
+    path = REPO_ROOT / agent  # a relative path is the repository's, as in the profiles
+    data = collect(make_policy(f"tqc:{path}", task), task, transitions, progress=False)
+    return data.episode_lengths
 
 
 def _time(step: Callable[[int], object], steps: int, warmup: int, device: torch.device) -> float:
@@ -123,6 +140,11 @@ def main() -> None:
     # cpu_bf16) emulates it ~15-25x slower than fp32.
     parser.add_argument("--bf16-steps", type=int, default=2)
     parser.add_argument("--device", default="cpu", help="cpu or cuda (both paths on it)")
+    parser.add_argument(
+        "--tqc-agent",
+        default="results/experts/tqc_push_sparse/model.zip",
+        help="the published agent whose episode lengths the *_tqc cells take ('': skip them)",
+    )
     args = parser.parse_args()
     device = resolve_device(args.device)
     if device.type == "cpu":  # as `gcdt train` on CPU; process-wide, so HF runs under it too
@@ -137,6 +159,9 @@ def main() -> None:
 
     samplers = {method: sampler(dataset, method) for method in ("dt", "bc")}
     samplers["dt_short"] = sampler(_dataset(length=13), "dt")
+    tqc_lengths = _agent_lengths(args.tqc_agent) if args.tqc_agent else None
+    if tqc_lengths is not None:
+        samplers["dt_tqc"] = sampler(_dataset(lengths=tqc_lengths), "dt")
     batches = {m: [s.sample(rng) for _ in range(8)] for m, s in samplers.items()}
     hf = _version("transformers") != "not installed"
     # Each gcdt cell right beside its HF twin: this VM's speed drifts within minutes.
@@ -149,6 +174,16 @@ def main() -> None:
         **(
             {"huggingface_fp32_short": lambda: _huggingface(False, dim, batches["dt_short"])}
             if hf
+            else {}
+        ),
+        **(
+            {"gcdt_fp32_tqc": lambda: _gcdt(TrainConfig(), dim, batches["dt_tqc"])}
+            if tqc_lengths is not None
+            else {}
+        ),
+        **(
+            {"huggingface_fp32_tqc": lambda: _huggingface(False, dim, batches["dt_tqc"])}
+            if hf and tqc_lengths is not None
             else {}
         ),
         "bc_fp32": lambda: _gcdt(TrainConfig(method="bc"), dim, batches["bc"]),
@@ -170,15 +205,19 @@ def main() -> None:
         "huggingface_bf16",
         "gcdt_fp32_short",
         "huggingface_fp32_short",
+        "gcdt_fp32_tqc",
+        "huggingface_fp32_tqc",
         "bc_fp32",
     ):
         if key in ms:
             results[f"{key}_ms_per_step"] = round(ms[key], 2)
             results[f"{key}_samples_per_second"] = round(64e3 / ms[key], 1)
-    for precision in ("fp32", "bf16", "fp32_short"):  # median of the paired ratios
-        ours, theirs = samples[f"gcdt_{precision}"], samples.get(f"huggingface_{precision}")
+    for precision in ("fp32", "bf16", "fp32_short", "fp32_tqc"):  # median of paired ratios
+        ours, theirs = samples.get(f"gcdt_{precision}"), samples.get(f"huggingface_{precision}")
         results[f"speedup_vs_huggingface_{precision}"] = (
-            None if theirs is None else round(float(np.median(np.divide(theirs, ours))), 3)
+            None
+            if theirs is None or ours is None
+            else round(float(np.median(np.divide(theirs, ours))), 3)
         )
     results["dt_sampler_share"] = round(ms["dt_sampler"] / ms["gcdt_fp32"], 4)
     results["bc_sampler_share"] = round(ms["bc_sampler"] / ms["bc_fp32"], 4)
@@ -194,12 +233,25 @@ def main() -> None:
             "dropout": 0.1,
             "state_dim": dim,
             "episode_steps": {"dt": 50, "dt_short": 13},
+            "tqc_agent": args.tqc_agent or None,
+            "tqc_episode_steps": None
+            if tqc_lengths is None
+            else {
+                "episodes": len(tqc_lengths),
+                "mean": round(float(tqc_lengths.mean()), 2),
+                "percentiles_5_50_95": [int(q) for q in np.percentile(tqc_lengths, [5, 50, 95])],
+            },
             "padding_share": {  # of the tokens of the batches timed
                 m: round(1 - float(torch.cat([b["mask"] for b in batches[m]]).float().mean()), 3)
-                for m in ("dt", "dt_short")
+                for m in batches
+                if m.startswith("dt")
             },
         },
-        "targets": {"speedup_vs_huggingface_fp32": ">= 1.5", "dt_sampler_share": "<= 0.05"},
+        "targets": {
+            "speedup_vs_huggingface_fp32": ">= 1.5",
+            "speedup_vs_huggingface_fp32_tqc": ">= 2",
+            "dt_sampler_share": "<= 0.05",
+        },
         "huggingface": "transformers " + _version("transformers"),
         "device": str(device),
         "torch_threads": torch.get_num_threads(),

@@ -744,7 +744,7 @@ class Sweep(_Command, _Progress):
         from gcdt.experiments.store import RunStore
         from gcdt.experiments.sweep import default_workers, section_costs, shared_cost
 
-        costs = CostModel.measured()  # reads the bench JSON and every result file: once
+        costs = CostModel.measured(profile.name)  # reads the bench JSON and results: once
         store = RunStore(results_dir(profile.name) / "runs")
         planned, warnings = plan(profile, store, self.only, costs)
         for warning in warnings:

@@ -574,6 +574,17 @@ def test_costs_learn_every_rate_from_finished_runs(tmp_path, monkeypatch):
     assert costs.rates["tqc_step:cpu"] == pytest.approx(600 / 20_000)
     assert costs.rates["bc_step"] == pytest.approx(5 / 1_000)
     assert costs.source["tqc_step:cpu"].endswith("finished runs")
+    # A profile's own runs measure its rates (its data, budgets, machine), where they have any.
+    large = tmp_path / "results" / "large" / "runs"
+    large.mkdir(parents=True)
+    bc = json.loads((runs / "bc.json").read_text())
+    bc["execution"]["seconds"]["train_seconds"] = 2.0
+    (large / "bc.json").write_text(json.dumps(bc))
+    costs = CostModel.measured("large")
+    assert costs.rates["bc_step"] == pytest.approx(2 / 1_000)
+    assert costs.source["bc_step"] == "median of 1 finished large runs"
+    assert costs.rates["tqc_step:cpu"] == pytest.approx(600 / 20_000)  # from quick's
+    assert CostModel.measured().rates["bc_step"] == pytest.approx((5 + 2) / 2 / 1_000)
 
 
 #: The paper profile's structure at toy sizes: TQC+HER experts, expert data collected by a

@@ -41,8 +41,10 @@ class CostModel:
     source: dict[str, str] = field(default_factory=lambda: dict.fromkeys(DEFAULT_RATES, "default"))
 
     @classmethod
-    def measured(cls) -> CostModel:
-        """Defaults, overridden by benchmark JSON, overridden by finished runs' timings."""
+    def measured(cls, profile: str | None = None) -> CostModel:
+        """Defaults, overridden by benchmark JSON, overridden by finished runs' timings; with
+        `profile`, a rate its own finished runs measure is theirs alone (its data, budgets and
+        machine), the other profiles' runs filling in the rest."""
         model = cls()
         bench = REPO_ROOT / "results" / "bench"
         if (bench / "tqc_her_throughput.json").exists():
@@ -63,6 +65,7 @@ class CostModel:
             ):
                 model._set(name, 1 / runs[key] if invert else runs[key], "run_costs.json")
         samples: dict[str, list[float]] = {}
+        own: dict[str, list[float]] = {}  # the same, from `profile`'s runs
         # The published runs and, in a reproduction, its own (the same file is read once).
         roots = dict.fromkeys(root.resolve() for root in (REPO_ROOT, outputs_root()))
         for path in (p for root in roots for p in (root / "results").glob("*/runs/*.json")):
@@ -70,10 +73,14 @@ class CostModel:
                 result = json.loads(path.read_text())
                 if result.get("status") == "done":
                     _samples(result, samples)
+                    if path.parent.parent.name == profile:
+                        _samples(result, own)
             except (OSError, ValueError, KeyError, TypeError, ZeroDivisionError):
                 continue  # an unreadable file is the store's business, not the estimate's
         for name, values in samples.items():
             model._set(name, median(values), f"median of {len(values)} finished runs")
+        for name, values in own.items():
+            model._set(name, median(values), f"median of {len(values)} finished {profile} runs")
         return model
 
     def _set(self, name: str, value: float, source: str) -> None:

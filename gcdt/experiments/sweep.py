@@ -114,7 +114,7 @@ def plan(
     """Every run of the grid (of section `only`, of `methods`) with its stored state and
     estimated cost; warnings for files that are not trusted (corrupt results, JSON files of no
     run of this grid)."""
-    costs = costs or CostModel.measured()
+    costs = costs or CostModel.measured(profile.name)
     planned, warnings, trained = [], [], set()
     for entry in build_grid(profile, only):
         if methods is not None and entry.spec.method not in methods:

@@ -182,9 +182,7 @@ def test_directions_across_profiles_set_each_profiles_answer_side_by_side(runs, 
     assert text.splitlines()[-1].startswith(last)
 
 
-def test_a_grid_still_running_shows_only_its_whole_cells_and_says_how_far_it_got(
-    runs, monkeypatch
-):
+def test_a_grid_still_running_shows_only_its_whole_cells_and_says_how_far_it_got(runs, monkeypatch):
     """A cell missing a seed, or a curve missing a point, is not read from what is there: a
     profile half-way through its grid must not publish a mean of fewer seeds than planned."""
     push_bc_seed2 = (runs["method"] == "bc") & (runs["task"] == "push") & (runs["seed"] == 2)

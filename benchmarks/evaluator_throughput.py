@@ -133,6 +133,10 @@ class _Timed:
         self.seconds += time.perf_counter() - began
         return action
 
+    @property
+    def intended(self) -> np.ndarray | None:  # the rollout records it beside the action
+        return self.policy.intended
+
     def config(self) -> dict:
         return self.policy.config()
 

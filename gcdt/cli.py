@@ -710,6 +710,11 @@ class Sweep(_Command, _Progress):
     only: str | None = setting(None, "one section of the grid", choices=SECTIONS)
     workers: int | None = setting(None, "parallel runs (default: cores)", minimum=1)
     dry_run: bool = setting(False, "list the runs, their state and estimated cost")
+    estimate_on: str = setting(
+        "cpu",
+        "the dry run's rates: this kind of CPU machine's, or a GPU's (results/bench/*_cuda.json)",
+        choices=("cpu", "cuda"),
+    )
 
     def run(self, command: str) -> int:
         from gcdt.experiments import get_profile, results_dir, sweep
@@ -717,6 +722,8 @@ class Sweep(_Command, _Progress):
         profile = get_profile(self.profile)
         if self.dry_run:
             return self._dry_run(profile)
+        if self.estimate_on != "cpu":
+            raise GcdtError("--estimate-on sets the rates of --dry-run: add --dry-run")
         from gcdt.paths import artifacts_dir
 
         # Before hours of runs, not after the first one.
@@ -744,7 +751,8 @@ class Sweep(_Command, _Progress):
         from gcdt.experiments.store import RunStore
         from gcdt.experiments.sweep import default_workers, section_costs, shared_cost
 
-        costs = CostModel.measured(profile.name)  # reads the bench JSON and results: once
+        # Reads the bench JSON and the results once.
+        costs = CostModel.measured(profile.name, on=self.estimate_on)
         store = RunStore(results_dir(profile.name) / "runs")
         planned, warnings = plan(profile, store, self.only, costs)
         for warning in warnings:
@@ -767,9 +775,12 @@ class Sweep(_Command, _Progress):
             agents = sorted({p.problem for p in waiting})
             print(f"{len(waiting)} of them wait for published agents: {'; '.join(agents)}")
         total = sum(p.estimate_seconds for p in todo) + shared
+        spread = f"{total / 3600 / workers:.1f} h on {workers} worker(s) (estimate)"
+        if costs.gpu:  # runs on one GPU share it rather than add up
+            spread = f"one run after another on one {costs.gpu} (estimate)"
         print(
             f"{len(planned)} runs, {len(todo)} to run: about {total / 3600:.1f} h of work, "
-            f"{total / 3600 / workers:.1f} h on {workers} worker(s) (estimate)"
+            + spread
         )
         return 0
 

@@ -549,6 +549,63 @@ def test_dry_run_lists_runs_with_state_and_cost(capsys):
     )
 
 
+def test_the_epoch_budget_is_estimated_from_the_collecting_policys_episode_length(
+    tmp_path, monkeypatch
+):
+    """The authors' epochs count episodes: the estimate reads the mean episode length of the
+    policy that collects the data from its published held-out evaluation."""
+    from gcdt.experiments import costs as cost_module
+    from gcdt.experiments.grid import data_spec
+
+    monkeypatch.setattr(cost_module, "REPO_ROOT", tmp_path)
+    cost_module._published_length.cache_clear()
+    agent = tmp_path / "results" / "experts" / "tqc_push_sparse"
+    agent.mkdir(parents=True)
+    held_out = {"timesteps": 3500, "episodes": 500}  # 7 steps per episode
+    (agent / "run.json").write_text(json.dumps({"published": {"held_out": held_out}}))
+    (tmp_path / "results" / "experts" / "push_sparse.json").write_text(
+        json.dumps({"summary": {"mean_length": 12.5}})
+    )
+    paper = get_profile("paper")
+    tqc = data_spec(paper, "push", 700_000, 1.0)
+    assert cost_module.expert_episode_length(tqc) == 7.0
+    assert cost_module.episodes(tqc) == 100_000
+    mixed = data_spec(paper, "push", 700_000, 0.5)  # random episodes run to the time limit
+    assert cost_module.episodes(mixed) == 50_000 + 350_000 // 50
+    scripted = data_spec(dataclasses.replace(paper, expert="scripted"), "push", 1000, 1.0)
+    assert cost_module.expert_episode_length(scripted) == 12.5
+    unknown = data_spec(paper, "reach", 3000, 1.0)  # no published evaluation of it
+    assert cost_module.expert_episode_length(unknown) == cost_module.ASSUMED_EPISODE_LENGTH
+    spec = next(e.spec for e in build_grid(paper) if e.spec.method == "gcdt")
+    spec = dataclasses.replace(spec, task="push", data=tqc)
+    assert cost_module.offline_steps(spec) == 120 * -(-100_000 // 64)
+    cost_module._published_length.cache_clear()
+
+
+def test_a_gpu_estimate_reads_the_gpu_benchmarks_and_refuses_without_them(
+    tmp_path, monkeypatch, assert_usage_error
+):
+    from gcdt.experiments import costs as cost_module
+
+    bench = cost_module.REPO_ROOT / "results" / "bench"
+    train = json.loads((bench / "training_throughput_cuda.json").read_text())
+    tqc = json.loads((bench / "tqc_her_throughput_cuda.json").read_text())
+    gpu = cost_module.CostModel.measured("paper", on="cuda")
+    assert gpu.rates["dt_step"] == train["results"]["gcdt_fp32_ms_per_step"] / 1e3
+    assert gpu.rates["bc_step"] == train["results"]["bc_fp32_ms_per_step"] / 1e3
+    paper_tqc = tqc["configs"]["paper"]["learning_steps_per_second"]
+    assert gpu.rates["tqc_step:paper"] == pytest.approx(1 / paper_tqc)
+    assert gpu.gpu == train["machine"]["gpu"] and gpu.source["dt_step"].endswith("_cuda.json")
+    assert gpu.rates["collect_step"] == cost_module.CostModel().rates["collect_step"]
+    monkeypatch.setattr(cost_module, "REPO_ROOT", tmp_path)
+    with pytest.raises(GcdtError, match=r"no GPU benchmark in .*: run .* --device cuda"):
+        cost_module.CostModel.measured("paper", on="cuda")
+    assert_usage_error(
+        ["sweep", "--profile", "smoke", "--estimate-on", "cuda"],
+        "--estimate-on sets the rates of --dry-run: add --dry-run",
+    )
+
+
 def test_costs_learn_every_rate_from_finished_runs(tmp_path, monkeypatch):
     """A reproduction's own finished runs (TQC+HER's included) set the dry run's rates."""
     from gcdt.experiments import costs as costs_module

@@ -8,12 +8,16 @@ seconds on this kind of machine; `source` says where each rate came from.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from statistics import median
 
-from gcdt.experiments.grid import OFFLINE_METHODS, RunSpec
+from gcdt.envs import TASKS
+from gcdt.errors import GcdtError
+from gcdt.experiments.grid import OFFLINE_METHODS, DataSpec, RunSpec
 from gcdt.paths import REPO_ROOT, outputs_root
 
 #: Reference-machine rates (seconds per unit), used when neither results/bench/ nor finished
@@ -29,7 +33,8 @@ DEFAULT_RATES = {
     "tqc_step:cpu": 1 / 61.4,  # the same with the cpu config
     "run_overhead": 5.0,  # process start, imports, env creation
 }
-#: Mean episode length assumed to turn transitions into the authors' epochs.
+#: Mean expert episode length assumed to turn transitions into the authors' epochs where no
+#: published evaluation of the collecting policy says better (`episode_length`).
 ASSUMED_EPISODE_LENGTH = 30
 #: The grid's methods that train a Decision Transformer (their steps and their acting cost more).
 DT_METHODS = tuple(name for name, (method, _) in OFFLINE_METHODS.items() if method == "dt")
@@ -39,14 +44,18 @@ DT_METHODS = tuple(name for name, (method, _) in OFFLINE_METHODS.items() if meth
 class CostModel:
     rates: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_RATES))
     source: dict[str, str] = field(default_factory=lambda: dict.fromkeys(DEFAULT_RATES, "default"))
+    gpu: str | None = None  # the GPU the rates were measured on (`measured(on="cuda")`)
 
     @classmethod
-    def measured(cls, profile: str | None = None) -> CostModel:
+    def measured(cls, profile: str | None = None, on: str = "cpu") -> CostModel:
         """Defaults, overridden by benchmark JSON, overridden by finished runs' timings; with
         `profile`, a rate its own finished runs measure is theirs alone (its data, budgets and
-        machine), the other profiles' runs filling in the rest."""
+        machine), the other profiles' runs filling in the rest. `on="cuda"`: the GPU
+        benchmarks' rates instead (`_gpu`), the CPU's where they measure nothing."""
         model = cls()
         bench = REPO_ROOT / "results" / "bench"
+        if on == "cuda":
+            return model._gpu(bench)
         if (bench / "tqc_her_throughput.json").exists():
             tqc = json.loads((bench / "tqc_her_throughput.json").read_text())
             for name, cell in tqc["configs"].items():
@@ -83,6 +92,33 @@ class CostModel:
             model._set(name, median(values), f"median of {len(values)} finished {profile} runs")
         return model
 
+    def _gpu(self, bench: Path) -> CostModel:
+        """Rates measured on a GPU machine by `benchmarks/*.py --device cuda`. Finished runs
+        are not read (they ran on CPUs); collection is the simulator's, a CPU rate anyway."""
+        files = {
+            name: json.loads((bench / f"{name}_cuda.json").read_text())
+            for name in ("training_throughput", "evaluator_throughput_push", "tqc_her_throughput")
+            if (bench / f"{name}_cuda.json").exists()
+        }
+        if not files:
+            raise GcdtError(
+                f"no GPU benchmark in {bench} (*_cuda.json): run benchmarks/training_throughput.py"
+                " and its siblings with --device cuda on a GPU machine first (docs/benchmarks.md)"
+            )
+        self.gpu = next(iter(files.values()))["machine"].get("gpu") or "a GPU"
+        if train := files.get("training_throughput"):
+            for name, key in (("dt_step", "gcdt_fp32"), ("bc_step", "bc_fp32")):
+                ms = train["results"][f"{key}_ms_per_step"]
+                self._set(name, ms / 1e3, "training_throughput_cuda.json")
+        if ev := files.get("evaluator_throughput_push"):  # one env per run, as a sweep's
+            rate = ev["results"]["evaluate_gcdt_1_envs"]
+            self._set("dt_eval_step", 1 / rate, "evaluator_throughput_push_cuda.json")
+        if tqc := files.get("tqc_her_throughput"):
+            for name, cell in tqc["configs"].items():
+                rate = 1 / cell["learning_steps_per_second"]
+                self._set(f"tqc_step:{name}", rate, "tqc_her_throughput_cuda.json")
+        return self
+
     def _set(self, name: str, value: float, source: str) -> None:
         self.rates[name], self.source[name] = value, source
 
@@ -106,11 +142,51 @@ class CostModel:
 
 def offline_steps(spec: RunSpec) -> int:
     """Gradient steps of an offline run: its budget, else the trainer's default (the authors'
-    epochs) for the data size in episodes of `ASSUMED_EPISODE_LENGTH`."""
+    epochs) for the data size in episodes (`episodes`)."""
     from gcdt.training import TrainConfig  # imports torch: only once costs are estimated
 
-    episodes = math.ceil(spec.data.size / ASSUMED_EPISODE_LENGTH)
-    return TrainConfig(steps=spec.train_steps).total_steps(episodes)
+    if spec.train_steps is not None:  # BC's always is (gcdt.experiments.grid.bc_steps)
+        return spec.train_steps
+    return TrainConfig().total_steps(episodes(spec.data))
+
+
+def episodes(data: DataSpec) -> int:
+    """Episodes in `data`: its expert part at the collecting policy's mean episode length
+    (`expert_episode_length`), its random part at the task's full episodes (random actions
+    rarely reach a goal, and an episode ends only then)."""
+    expert = data.size * data.expert_ratio
+    random = data.size - expert
+    return math.ceil(
+        expert / expert_episode_length(data) + random / TASKS[data.task].max_episode_steps
+    )
+
+
+@functools.lru_cache(maxsize=32)
+def _published_length(path: Path) -> float | None:
+    """Mean episode length of a published evaluation file: a TQC+HER agent's run.json (its
+    held-out evaluation) or a scripted expert's `gcdt evaluate --json` output."""
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if held_out := record.get("published", {}).get("held_out"):
+        return held_out["timesteps"] / held_out["episodes"]
+    return record.get("summary", {}).get("mean_length")
+
+
+def expert_episode_length(data: DataSpec) -> float:
+    """The mean episode length of the policy that collects `data`'s expert part, from its
+    published held-out evaluation (results/experts/: the TQC+HER agent's run.json, or the
+    scripted expert's noise-free evaluation), else `ASSUMED_EPISODE_LENGTH`."""
+    experts = REPO_ROOT / "results" / "experts"
+    if data.expert.startswith("tqc"):  # a published agent, or the grid's own TQC expert
+        reward = data.expert_tqc.reward if data.expert_tqc else "sparse"
+        path = experts / f"tqc_{data.task}_{reward}" / "run.json"
+        if data.expert.startswith("tqc:"):
+            path = REPO_ROOT / Path(data.expert.removeprefix("tqc:")).parent / "run.json"
+    else:
+        path = experts / f"{data.task}_sparse.json"
+    return _published_length(path) or ASSUMED_EPISODE_LENGTH
 
 
 def _samples(result: dict, samples: dict[str, list[float]]) -> None:

@@ -163,14 +163,17 @@ def test_run_key_is_stable_and_complete():
     assert dataclasses.replace(spec, learning_rate=1e-3).key() != spec.key()
 
 
-@pytest.mark.parametrize("name", ["quick", "standard"])
-def test_each_published_run_file_is_a_run_its_grid_names(name):
+@pytest.mark.parametrize(
+    ("name", "finished"), [("quick", True), ("standard", True), ("large", False)]
+)
+def test_each_published_run_file_is_a_run_its_grid_names(name, finished):
     """The published results are filed under the keys the grid gives their runs today (run
-    scripts/migrate_run_keys.py after a change to how keys are computed)."""
+    scripts/migrate_run_keys.py after a change to how keys are computed); a grid still running
+    (large) publishes its finished sections, so some of its runs have no file yet."""
     runs = REPO_ROOT / "results" / name / "runs"
     published = {path.stem: json.loads(path.read_text()) for path in runs.glob("*.json")}
     grid = {e.spec.key(): e.spec for e in build_grid(get_profile(name))}
-    assert set(published) == set(grid)
+    assert set(published) == set(grid) if finished else set(published) <= set(grid)
     for key, result in published.items():
         assert result["key"] == key and result["schema"] == RUN_SCHEMA
         assert result["spec"] == json.loads(json.dumps(grid[key].to_dict()))

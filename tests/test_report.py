@@ -275,7 +275,8 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     assert record["run_seconds"] == 7200.0 + 60 * (len(grid) - 2)
     # report.md prints the profile's description with the measured cost beside it.
     written = (tmp_path / "results" / PROFILE.name / "report.md").read_text()
-    assert f"finished runs). {report.wall_time_text(PROFILE)}\n\nThe `report-test`" in written
+    done = f"({len(grid)} of {len(grid)} runs finished)"
+    assert f"{done}. {report.wall_time_text(PROFILE)}\n\nThe `report-test`" in written
     assert "it took **90 min** for the rest" in written
     block = report.readme_block(PROFILE)
     assert "**90 min**" in block and "| GC-DT vs BC, Push sparse |" in block

@@ -34,7 +34,7 @@ DEFAULT_RATES = {
     "run_overhead": 5.0,  # process start, imports, env creation
 }
 #: Mean expert episode length assumed to turn transitions into the authors' epochs where no
-#: published evaluation of the collecting policy says better (`episode_length`).
+#: published evaluation of the collecting policy says better (`expert_episode_length`).
 ASSUMED_EPISODE_LENGTH = 30
 #: The grid's methods that train a Decision Transformer (their steps and their acting cost more).
 DT_METHODS = tuple(name for name, (method, _) in OFFLINE_METHODS.items() if method == "dt")

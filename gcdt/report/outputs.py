@@ -7,7 +7,6 @@ from pathlib import Path
 import pandas as pd
 
 from gcdt.baselines.publish import AGENTS_DIR
-from gcdt.experiments.grid import build_grid
 from gcdt.experiments.profiles import Profile, deviations_text
 from gcdt.paths import REPO_ROOT, outputs_root, results_dir, write_if_changed
 from gcdt.report import agents, budget, figures, generalisation, tables, targets
@@ -101,8 +100,7 @@ def write_report(profile: Profile) -> list[Path]:
     written = write_tables(profile, runs) + write_figures(profile, runs) + write_agents_table()
     report = results_dir(profile.name) / "report.md"
     table1 = tables.to_markdown(tables.table1(runs))
-    done = int((~runs["key"].str.startswith(tables.AGENT_KEY)).sum())
-    planned = len(build_grid(profile))
+    done, planned = tables.progress(runs, profile)
     agents = len(runs) - done
     also = f", and {agents} published agents" if agents else ""
     if done < planned:  # a grid still running shows what it has

@@ -570,6 +570,12 @@ CELL = ["method", "task", "reward", "size", "expert_ratio", "train_steps", "targ
         "eval_region", "train_region"]  # fmt: skip
 
 
+def progress(runs: pd.DataFrame, profile: Profile) -> tuple[int, int]:
+    """(finished, planned) runs of `profile`'s grid, `runs` being its `load_runs` (whose
+    published agents' rows are no runs of the grid)."""
+    return int((~runs["key"].str.startswith(AGENT_KEY)).sum()), len(build_grid(profile))
+
+
 def complete_cells(runs: pd.DataFrame, profile: Profile) -> pd.DataFrame:
     """The rows of `runs` whose cell has every one of `profile`'s seeds (a published agent's
     row stands alone): a grid still running publishes no mean of fewer seeds than planned."""
@@ -595,9 +601,9 @@ def directions_across(profiles: list[Profile]) -> pd.DataFrame:
         table = directions(runs, profile) if not runs.empty else pd.DataFrame()
         if not table.empty:  # runs, but none of the comparisons (a section alone)
             tables[profile.name] = table.set_index("comparison")
-            done = int((~finished["key"].str.startswith(AGENT_KEY)).sum())
-            if done < len(build_grid(profile)):  # a grid still running: the header says so
-                partial[profile.name] = (done, len(build_grid(profile)))
+            done, planned = progress(finished, profile)
+            if done < planned:  # a grid still running: the header says so
+                partial[profile.name] = (done, planned)
     rows: dict[str, dict] = {}
     for name, table in tables.items():
         for comparison, row in table.iterrows():

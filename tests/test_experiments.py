@@ -621,7 +621,13 @@ def test_costs_learn_every_rate_from_finished_runs(tmp_path, monkeypatch):
     runs.mkdir(parents=True)
     timed = {"tqc": ({"env_steps": 20_000}, 600.0), "bc": ({"steps": 1_000}, 5.0)}
     for method, (training, train_seconds) in timed.items():
-        spec = {"method": method, "tqc": {"config": "cpu"}, "eval_timesteps": 0, "eval_seeds": []}
+        spec = {
+            "method": method,
+            "task": "push",
+            "tqc": {"config": "cpu"},
+            "eval_timesteps": 0,
+            "eval_seeds": [],
+        }
         result = {
             "status": "done",
             "spec": spec,
@@ -645,6 +651,14 @@ def test_costs_learn_every_rate_from_finished_runs(tmp_path, monkeypatch):
     assert costs.source["bc_step"] == "median of 1 finished large runs"
     assert costs.rates["tqc_step:cpu"] == pytest.approx(600 / 20_000)  # from quick's
     assert CostModel.measured().rates["bc_step"] == pytest.approx((5 + 2) / 2 / 1_000)
+    # A task's own runs set its rate; the pooled rate stands in for tasks without any.
+    reach = dict(bc, spec=dict(bc["spec"], task="reach"))
+    reach["execution"] = {"seconds": {"train_seconds": 1.5}}
+    (large / "bc_reach.json").write_text(json.dumps(reach))
+    costs = CostModel.measured("large")
+    assert costs.rate("bc_step", "reach") == pytest.approx(1.5 / 1_000)
+    assert costs.rate("bc_step", "push") == pytest.approx(2 / 1_000)
+    assert costs.rate("bc_step", "pick_and_place") == pytest.approx((1.5 + 2) / 2 / 1_000)
 
 
 #: The paper profile's structure at toy sizes: TQC+HER experts, expert data collected by a

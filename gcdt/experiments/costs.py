@@ -50,7 +50,8 @@ class CostModel:
     def measured(cls, profile: str | None = None, on: str = "cpu") -> CostModel:
         """Defaults, overridden by benchmark JSON, overridden by finished runs' timings; with
         `profile`, a rate its own finished runs measure is theirs alone (its data, budgets and
-        machine), the other profiles' runs filling in the rest. `on="cuda"`: the GPU
+        machine), the other profiles' runs filling in the rest. Offline gradient steps are
+        also measured per task (`rate`). `on="cuda"`: the GPU
         benchmarks' rates instead (`_gpu`), the CPU's where they measure nothing."""
         model = cls()
         bench = REPO_ROOT / "results" / "bench"
@@ -86,10 +87,16 @@ class CostModel:
                         _samples(result, own)
             except (OSError, ValueError, KeyError, TypeError, ZeroDivisionError):
                 continue  # an unreadable file is the store's business, not the estimate's
-        for name, values in samples.items():
-            model._set(name, median(values), f"median of {len(values)} finished runs")
-        for name, values in own.items():
-            model._set(name, median(values), f"median of {len(values)} finished {profile} runs")
+        # A task's own rate ("dt_step:push") outranks the pooled one: a step's cost follows the
+        # task's episode lengths (GC-DT on Push's data costs about 3x a step on Reach's), and
+        # a profile's runs of one task would otherwise set every task's rate.
+        for pooled in (True, False):
+            for found, whose in ((samples, ""), (own, f" {profile}")):
+                for name, values in found.items():
+                    if (":" not in name or name.startswith("tqc_step")) == pooled:
+                        model._set(
+                            name, median(values), f"median of {len(values)} finished{whose} runs"
+                        )
         return model
 
     def _gpu(self, bench: Path) -> CostModel:
@@ -134,7 +141,13 @@ class CostModel:
             return seconds + (spec.tqc.steps or 0) * rate
         if not train:
             return seconds
-        return seconds + offline_steps(spec) * r["bc_step" if spec.method == "bc" else "dt_step"]
+        return seconds + offline_steps(spec) * self.rate(
+            "bc_step" if spec.method == "bc" else "dt_step", spec.task
+        )
+
+    def rate(self, name: str, task: str) -> float:
+        """Seconds per unit of `name` on `task`: the task's own measured rate, else the pooled."""
+        return self.rates.get(f"{name}:{task}", self.rates[name])
 
     def collection(self, transitions: int) -> float:
         return transitions * self.rates["collect_step"]
@@ -200,7 +213,8 @@ def _samples(result: dict, samples: dict[str, list[float]]) -> None:
     elif (steps := training.get("steps")) and steps >= 100 and seconds.get("train_seconds", 0) > 1:
         # (Short runs measure start-up more than steps; a reused checkpoint measures nothing.)
         name = "bc_step" if spec["method"] == "bc" else "dt_step"
-        samples.setdefault(name, []).append(seconds["train_seconds"] / steps)
+        for key in (name, f"{name}:{spec['task']}"):
+            samples.setdefault(key, []).append(seconds["train_seconds"] / steps)
     evaluated = spec["eval_timesteps"] * len(spec["eval_seeds"])
     if seconds.get("evaluate_seconds") and evaluated >= 1000:
         name = "dt_eval_step" if spec["method"] in DT_METHODS else "eval_step"

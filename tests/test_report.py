@@ -236,6 +236,32 @@ def test_budget_check_sets_the_longer_run_against_the_budget_runs_interval(
     )
 
 
+def test_fidelity_sets_each_gcdt_cell_against_the_papers_targets_beside_its_data(tmp_path):
+    from gcdt.report import fidelity
+
+    store = RunStore(tmp_path)
+    # Reach: the paper's success, a return 20 % worse (within 25 %); Push: 5 points short and
+    # twice the paper's return, from data that was itself that slow.
+    ours = {"reach": (1.0, -1.72 * 1.2), "push": (0.90, -8.26 * 2)}
+    for entry in build_grid(PROFILE):
+        spec = entry.spec
+        success, mean_return = ours[spec.task] if spec.method == "gcdt" else (0.5, -30.0)
+        data = {"success_rate": success, "mean_return_sparse": mean_return - 1}
+        _write_result(store, spec, {"success_rate": success, "mean_return": mean_return,
+                                    "episodes": 200}, training={"dataset": data})  # fmt: skip
+    table = fidelity.fidelity_table(tables.load_runs(PROFILE, tmp_path)).set_index("task")
+    reach, push = table.loc["reach"], table.loc["push"]
+    assert reach["success_met"] and reach["return_met"] and reach["seeds"] == 3
+    assert reach["return_gap"] == pytest.approx(-0.2)
+    assert push["success_gap"] == pytest.approx(90 - 95.0) and not push["success_met"]
+    assert push["return_gap"] == pytest.approx(-1.0) and not push["return_met"]
+    assert (push["data_success"], push["data_return"]) == pytest.approx((90.0, -8.26 * 2 - 1))
+    md = fidelity.fidelity_markdown(table.reset_index())
+    assert "| sparse | Push | 3 | 90.0 (95.0) | **-5.0** | -16.52 (-8.26) | **-100 %** |" in md
+    assert "| sparse | Reach | 3 | 100.0 (100.0) | +0.0 | -2.06 (-1.72) | -20 % |" in md
+    assert md.endswith("| 1 of 2 cells |")
+
+
 def test_directions_check_the_papers_floor_at_a_quarter_of_expert_data(tmp_path):
     profile = dataclasses.replace(PROFILE, rq5_ratios=(0.0, 0.25, 1.0))
     store = RunStore(tmp_path)

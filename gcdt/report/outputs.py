@@ -9,7 +9,7 @@ import pandas as pd
 from gcdt.baselines.publish import AGENTS_DIR
 from gcdt.experiments.profiles import Profile, deviations_text
 from gcdt.paths import REPO_ROOT, outputs_root, results_dir, write_if_changed
-from gcdt.report import agents, budget, figures, generalisation, tables, targets
+from gcdt.report import agents, budget, fidelity, figures, generalisation, tables, targets
 from gcdt.report.readme import wall_time_text
 
 #: Table 1's TQC+HER cells from the published agents, beside them (`gcdt.report.agents`).
@@ -42,6 +42,10 @@ def write_tables(profile: Profile, runs) -> list[Path]:
         best = targets.best_targets(runs)
         files["return_target.csv"], files["best_target.csv"] = _csv(study), _csv(best)
         files["best_target.md"] = targets.best_targets_markdown(best) + "\n"
+    cells = fidelity.fidelity_table(runs)
+    if not cells.empty:  # GC-DT against the paper's Table 1, beside its data
+        files["fidelity.csv"] = _csv(cells)
+        files["fidelity.md"] = fidelity.fidelity_markdown(cells) + "\n"
     checks = budget.budget_table(runs)
     if not checks.empty:  # the fixed offline budget against a longer one
         files["budget_check.csv"] = _csv(checks)
@@ -91,6 +95,13 @@ def write_agents_table(agents_dir: str | Path = AGENTS_DIR) -> list[Path]:
     return [out / f"{AGENTS_TABLE}{suffix}" for suffix in files]
 
 
+def _fidelity_section(runs) -> str:
+    cells = fidelity.fidelity_table(runs)
+    if cells.empty:
+        return ""
+    return f"\n## {fidelity.CAPTION}\n\n{fidelity.fidelity_markdown(cells)}\n"
+
+
 def write_report(profile: Profile) -> list[Path]:
     """Every table and results figure of `profile` from its run results, the published
     agents' table (`write_agents_table`), and report.md: the deviations from the paper,
@@ -114,6 +125,6 @@ def write_report(profile: Profile) -> list[Path]:
         f"{deviations_text(profile)}\n\n"
         "## Table 1: return / success rate (%), mean ± std over seeds [95 % bootstrap "
         "interval of the success rate over seeds]\n\n"
-        f"{table1}\n",
+        f"{table1}\n" + _fidelity_section(runs),
     )
     return [*written, report]

@@ -17,7 +17,7 @@ from gcdt.paths import (
     write_between_markers,
     write_json_atomic,
 )
-from gcdt.report import budget, figures, generalisation, tables, targets
+from gcdt.report import budget, fidelity, figures, generalisation, tables, targets
 
 README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
 
@@ -168,6 +168,9 @@ def readme_block(profile: Profile) -> str:
             [profile if n == name else get_profile(n) for n in (*DIRECTION_PROFILES, *_own)]
         ),
     ]
+    cells = fidelity.fidelity_table(runs)
+    if not cells.empty:
+        parts += [f"**{fidelity.CAPTION}**:", fidelity.fidelity_markdown(cells)]
     checks = budget.budget_table(runs)
     if not checks.empty:
         parts += [

@@ -331,6 +331,14 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     assert "3 of its run files are the `smoke` profile's, byte for byte" in (
         report.readme_block(PROFILE)
     )
+    # A grid still running says so, and what its finished runs cost so far.
+    for entry in grid[-2:]:  # two of the 60 s runs
+        (tmp_path / "results" / PROFILE.name / "runs" / f"{entry.spec.key()}.json").unlink()
+    report.write_report(PROFILE)
+    written = (tmp_path / "results" / PROFILE.name / "report.md").read_text()
+    hours = (7200 + 60 * (len(grid) - 4)) / 3600
+    assert f"({len(grid) - 2} of {len(grid)} runs finished; the grid is still running (its " \
+        f"finished runs took {hours:.1f} h of their own time" in written  # fmt: skip
 
 
 def test_report_cli_rejects_a_negative_wall_time(capsys):

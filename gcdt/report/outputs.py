@@ -114,8 +114,13 @@ def write_report(profile: Profile) -> list[Path]:
     done, planned = tables.progress(runs, profile)
     agents = len(runs) - done
     also = f", and {agents} published agents" if agents else ""
-    if done < planned:  # a grid still running shows what it has
-        also += "; the grid is still running, and a cell is the mean of the seeds done so far"
+    if done < planned:  # a grid still running shows what it has, and what it cost so far
+        grid = runs[~runs["key"].str.startswith(tables.AGENT_KEY)]
+        spent = sum(e.get("seconds", {}).get("total_seconds", 0.0) for e in grid["execution"])
+        also += (
+            f"; the grid is still running (its finished runs took {spent / 3600:.1f} h of their"
+            " own time, shared datasets included), and a cell is the mean of the seeds done so far"
+        )
     write_if_changed(
         report,
         f"# Results: profile `{profile.name}`\n\n"

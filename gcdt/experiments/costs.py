@@ -88,8 +88,8 @@ class CostModel:
             except (OSError, ValueError, KeyError, TypeError, ZeroDivisionError):
                 continue  # an unreadable file is the store's business, not the estimate's
         # A task's own rate ("dt_step:push") outranks the pooled one: a step's cost follows the
-        # task's episode lengths (GC-DT on Push's data costs about 3x a step on Reach's), and
-        # a profile's runs of one task would otherwise set every task's rate.
+        # data's episode lengths (the training benchmark's `*_short` and `*_tqc` cases), and a
+        # profile's runs of one task would otherwise set every task's rate.
         for pooled in (True, False):
             for found, whose in ((samples, ""), (own, f" {profile}")):
                 for name, values in found.items():

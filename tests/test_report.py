@@ -337,8 +337,15 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     report.write_report(PROFILE)
     written = (tmp_path / "results" / PROFILE.name / "report.md").read_text()
     hours = (7200 + 60 * (len(grid) - 4)) / 3600
-    assert f"({len(grid) - 2} of {len(grid)} runs finished; the grid is still running (its " \
-        f"finished runs took {hours:.1f} h of their own time" in written  # fmt: skip
+    running = (
+        f"({len(grid) - 2} of {len(grid)} runs finished; the grid is still running (its "
+        f"finished runs took {hours:.1f} h of their own time"
+    )
+    assert running in written
+    # The README block of a profile whose grid is running (the one to quote while it runs)
+    # says the same, and where to find what is left.
+    block = report.readme_block(PROFILE)
+    assert running in block and f"`gcdt sweep --profile {PROFILE.name} --dry-run` lists" in block
 
 
 def test_report_cli_rejects_a_negative_wall_time(capsys):

@@ -182,6 +182,33 @@ def test_directions_across_profiles_set_each_profiles_answer_side_by_side(runs, 
     assert text.splitlines()[-1].startswith(last)
 
 
+def test_table1_across_profiles_sets_each_cell_beside_the_papers(runs, monkeypatch):
+    """Each Table 1 cell's mean in every profile with published runs, then the paper's; a cell
+    a profile has not finished with every seed is '--', not a mean of fewer seeds."""
+    push_bc_seed2 = (runs["method"] == "bc") & (runs["task"] == "push") & (runs["seed"] == 2)
+    by_name = {"small": runs[~push_bc_seed2], "big": runs}
+
+    def load(profile, runs_dir=None):
+        if profile.name not in by_name:
+            raise GcdtError("no finished runs")
+        return by_name[profile.name]
+
+    monkeypatch.setattr(tables, "load_runs", load)
+    names = [dataclasses.replace(PROFILE, name=n) for n in ("small", "big", "unrun")]
+    across = tables.table1_across(names)
+    assert list(across.columns) == ["reward", "method", "task", "small", "big", "paper"]
+    whole = tables.table1(runs).set_index(["reward", "method", "task"])
+    push_bc = across.set_index(["reward", "method", "task"]).loc[("sparse", "bc", "push")]
+    mean = whole.loc[("sparse", "bc", "push")]
+    assert push_bc["big"] == f"{mean['return_mean']:.2f} / {mean['success_mean']:.1f}"
+    assert pd.isna(push_bc["small"])  # 2 of its 3 seeds
+    assert push_bc["paper"] == "-8.18 / 94.6"  # the paper's Table 1
+    text = tables.table1_across_markdown(names)
+    assert text.splitlines()[0] == "| reward | method | task | `small` | `big` | paper |"
+    assert f"| sparse | BC | Push | -- | {push_bc['big']} | -8.18 / 94.6 |" in text
+    assert tables.table1_across_markdown(names[2:]).startswith("*No profile")
+
+
 def test_a_grid_still_running_shows_only_its_whole_cells_and_says_how_far_it_got(runs, monkeypatch):
     """A cell missing a seed, or a curve missing a point, is not read from what is there: a
     profile half-way through its grid must not publish a mean of fewer seeds than planned."""

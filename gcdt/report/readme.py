@@ -168,9 +168,9 @@ def _points_markdown(fig: str, runs) -> str:
 
 def readme_block(profile: Profile) -> str:
     """The README's results section, all generated from results/<profile>/: Table 1 beside
-    the paper's values, where ours and the paper's point in different directions, the
-    ablation, Fig. 3 and 4 and the two studies' figures with their numbers, the wall time and
-    the profile's deviations."""
+    the paper's values, where ours and the paper's point in different directions, Table 1
+    in every profile (smallest first), the ablation, Fig. 3 and 4 and the two studies'
+    figures with their numbers, the wall time and the profile's deviations."""
     runs = tables.load_runs(profile)
     name = profile.name
     _own = [] if name in DIRECTION_PROFILES else [name]  # smallest first, this one included
@@ -186,6 +186,13 @@ def readme_block(profile: Profile) -> str:
         f"under {tables.EQUAL_POINTS:g} point count as equal; bold: the other direction than "
         "the paper's; --: the profile does not make that comparison):",
         tables.directions_across_markdown(
+            [profile if n == name else get_profile(n) for n in (*DIRECTION_PROFILES, *_own)]
+        ),
+    ]
+    parts += [
+        "**Table 1 at every scale**: each cell's return / success rate (%) in every profile "
+        "that has published it with all its seeds, smallest first, beside the paper's:",
+        tables.table1_across_markdown(
             [profile if n == name else get_profile(n) for n in (*DIRECTION_PROFILES, *_own)]
         ),
     ]

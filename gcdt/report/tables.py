@@ -614,6 +614,54 @@ def directions_across(profiles: list[Profile]) -> pd.DataFrame:
     return out
 
 
+def table1_across(profiles: list[Profile]) -> pd.DataFrame:
+    """Table 1's cells in every profile of `profiles` with published runs, beside the paper's:
+    one row per reward, method and task, per profile its "return / success %" (cells with
+    every seed only), so a reader sees which numbers move towards the paper's with scale."""
+    cells: dict[tuple, dict] = {}
+    names: list[str] = []
+    for profile in profiles:
+        try:
+            runs = complete_cells(load_runs(profile), profile)
+        except GcdtError:
+            continue  # nothing published for this profile yet
+        table = table1(runs) if not runs.empty else pd.DataFrame()
+        if table.empty:
+            continue
+        names.append(profile.name)
+        for _, row in table.iterrows():
+            cell = cells.setdefault(
+                (row["reward"], row["method"], row["task"]),
+                {"reward": row["reward"], "method": row["method"], "task": row["task"]},
+            )
+            cell[profile.name] = f"{row['return_mean']:.2f} / {row['success_mean']:.1f}"
+            if not np.isnan(row["paper_return"]):
+                cell["paper"] = f"{row['paper_return']:.2f} / {row['paper_success']:.1f}"
+    columns = ["reward", "method", "task", *names, "paper"]
+    out = pd.DataFrame(list(cells.values()), columns=columns)
+    return _ordered(out, ["dense", "sparse"], ["gcdt", "bc", "tqc"]) if len(out) else out
+
+
+def table1_across_markdown(profiles: list[Profile]) -> str:
+    """`table1_across` as Markdown ("--": the profile has no finished cell there)."""
+    table = table1_across(profiles)
+    names = list(table.columns[3:-1])
+    if not names:
+        return "*No profile has published a Table 1 cell with every seed.*"
+    lines = [
+        "| reward | method | task | " + " | ".join(f"`{n}`" for n in names) + " | paper |",
+        "|---|---|---|" + "---|" * (len(names) + 1),
+    ]
+    for row in table.itertuples(index=False):
+        values = ["--" if not isinstance(v, str) else v for v in row[3:]]
+        lines.append(
+            f"| {row.reward} | {METHOD_NAMES[row.method]} | {TASK_NAMES[row.task]} | "
+            + " | ".join(values)
+            + " |"
+        )
+    return "\n".join(lines)
+
+
 def directions_across_markdown(profiles: list[Profile]) -> str:
     """`directions_across` as Markdown, a disagreement in bold, and each profile's count."""
     table = directions_across(profiles)

@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.gcdt-installed
 PYTEST_ARGS ?=
 PROFILE ?= quick
-README_PROFILE ?= standard
+README_PROFILE ?= large
 BACKEND ?= local
 # A reproduction's own results and figures: never the published results/ and figures/.
 REPRO_DIR ?= $(or $(GCDT_OUTPUTS),$(or $(GCDT_ARTIFACTS),artifacts)/reproduce)

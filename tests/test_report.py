@@ -373,6 +373,18 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     # says the same, and where to find what is left.
     block = report.readme_block(PROFILE)
     assert running in block and f"`gcdt sweep --profile {PROFILE.name} --dry-run` lists" in block
+    # Both list the grid's sections, each run once: what is finished, and the rest's estimate.
+    left = tables.sections_left(PROFILE)
+    assert list(left["section"]) == [s for s in PROFILE.section_order if s in set(left["section"])]
+    assert left["planned"].sum() == len(grid) and left["finished"].sum() == len(grid) - 2
+    unfinished = left[left["finished"] < left["planned"]]
+    assert len(unfinished) >= 1 and (unfinished["hours_left"] > 0).all()
+    assert (left[left["finished"] == left["planned"]]["hours_left"] == 0).all()
+    row = unfinished.iloc[0]
+    line = (
+        f"| {row.section} | {row.finished} | {row.planned} | about {row.hours_left:.1f} h of work |"
+    )
+    assert "**The grid's sections**" in written and line in written and line in block
 
 
 def test_report_cli_rejects_a_negative_wall_time(capsys):

@@ -22,6 +22,7 @@ from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
 from gcdt.experiments.profiles import Profile
 from gcdt.experiments.store import RunStore
+from gcdt.experiments.sweep import plan
 from gcdt.paths import results_dir
 
 TASK_NAMES = {"reach": "Reach", "push": "Push", "pick_and_place": "PickAndPlace"}
@@ -574,6 +575,40 @@ def progress(runs: pd.DataFrame, profile: Profile) -> tuple[int, int]:
     """(finished, planned) runs of `profile`'s grid, `runs` being its `load_runs` (whose
     published agents' rows are no runs of the grid)."""
     return int((~runs["key"].str.startswith(AGENT_KEY)).sum()), len(build_grid(profile))
+
+
+def sections_left(profile: Profile) -> pd.DataFrame:
+    """Per section of `profile`'s grid, in its sweep's order: runs finished, runs planned, and
+    the dry run's estimate of the hours the rest take (`gcdt sweep --dry-run`'s cost model,
+    measured from the published runs; collections excluded: what is missing depends on the
+    machine). Each run counts in the first of its sections, as the dry run counts it."""
+    planned, _ = plan(profile, RunStore(results_dir(profile.name) / "runs"))
+    rows: dict[str, dict] = {}
+    for run in planned:
+        row = rows.setdefault(
+            run.entry.sections[0],
+            {"section": run.entry.sections[0], "finished": 0, "planned": 0, "hours_left": 0.0},
+        )
+        row["planned"] += 1
+        if run.state == "done":
+            row["finished"] += 1
+        else:
+            row["hours_left"] += run.estimate_seconds / 3600
+    return pd.DataFrame(
+        list(rows.values()), columns=["section", "finished", "planned", "hours_left"]
+    )
+
+
+def sections_left_markdown(table: pd.DataFrame) -> str:
+    """`sections_left` as Markdown: a finished section's estimate is '--'."""
+    lines = [
+        "| section | runs finished | of | the rest, estimated |",
+        "|---|---|---|---|",
+    ]
+    for r in table.itertuples(index=False):
+        rest = "--" if r.finished == r.planned else f"about {r.hours_left:.1f} h of work"
+        lines.append(f"| {r.section} | {r.finished} | {r.planned} | {rest} |")
+    return "\n".join(lines)
 
 
 def complete_cells(runs: pd.DataFrame, profile: Profile) -> pd.DataFrame:

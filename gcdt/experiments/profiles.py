@@ -321,8 +321,8 @@ LARGE = dataclasses.replace(
     table1_tqc=Scope(tasks=()),
     # The paper's 120 epochs over 1M transitions cost what `gcdt sweep --profile paper
     # --dry-run` estimates per run: a fixed budget instead, at the rate that learns in a budget
-    # this size (results/quick_checks/README.md), justified by the
-    # budget check below tests (GC-DT trained 4 times longer), the same rule for BC ("samples").
+    # this size (results/quick_checks/README.md), which the budget check below tests (GC-DT
+    # trained 4 times longer), the same rule for BC ("samples").
     train_steps={"reach": 2_000, "push": 10_000, "pick_and_place": 10_000},
     learning_rate=1e-3,
     eval_envs=4,

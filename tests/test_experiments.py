@@ -730,7 +730,10 @@ def test_large_profile_keeps_the_papers_data_and_evaluation():
     assert (pnp.expert, pnp.expert_noise) == ("scripted", 0.2)
     assert push.expert.startswith("tqc:") and push.expert_noise == 0.0
     assert "Table 1's TQC+HER cells from the published agents of 1,000,000 online steps" in text
-    assert "checked against one 4 times longer on push, pick_and_place (sparse)" in text
+    assert (
+        "checked against one 4 times longer on push, pick_and_place (sparse), GC-DT, one seed, "
+        "at 100%, 25% expert data" in text
+    )
     assert "RQ5 (Fig. 4) on push, pick_and_place × sparse only" in text
     assert "RQ5 expert ratios" not in text  # the paper's shares, in priority order
     assert "RQ4 subset sizes 100,000, 250,000, 500,000, 1,000,000 instead of" in text
@@ -740,16 +743,25 @@ def test_large_profile_keeps_the_papers_data_and_evaluation():
     first = [e.sections[0] for e in grid]
     assert first == sorted(first, key=large.section_order.index)
     budget = [e.spec for e in grid if e.sections == ("budget",)]
-    assert [(s.task, s.seed, s.train_steps) for s in budget] == [
-        ("push", 0, 40_000),
-        ("pick_and_place", 0, 40_000),
+    # On expert data and at RQ5's disputed 25 %, each beside the grid's run of that data.
+    assert [(s.task, s.seed, s.train_steps, s.data.expert_ratio) for s in budget] == [
+        ("push", 0, 40_000, 1.0),
+        ("push", 0, 40_000, 0.25),
+        ("pick_and_place", 0, 40_000, 1.0),
+        ("pick_and_place", 0, 40_000, 0.25),
     ]
+    cells = {e.spec.key(): e.spec for e in grid if "budget" not in e.sections}
+    for spec in budget:
+        base = dataclasses.replace(spec, train_steps=10_000)
+        assert base.key() in cells, f"no grid run of the budget check's data: {spec.label}"
     rq5 = [e.spec.data.expert_ratio for e in grid if e.sections == ("rq5",)]
     assert rq5[:2] == [0.25, 0.25] and set(rq5) == {0.0, 0.25, 0.5, 0.75}
     with pytest.raises(GcdtError, match="section_order must order every section once"):
         dataclasses.replace(large, section_order=("table1",))
     with pytest.raises(GcdtError, match="the budget check needs fixed train_steps"):
         dataclasses.replace(large, train_steps=None)
+    with pytest.raises(GcdtError, match=r"budget_ratios must be expert shares in \[0, 1\]"):
+        dataclasses.replace(large, budget_ratios=(1.5,))
     with pytest.raises(GcdtError, match=r"from the published agents \(tqc_agents\) or from grid"):
         dataclasses.replace(large, table1_tqc=Scope())
 

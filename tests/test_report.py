@@ -245,22 +245,31 @@ def test_budget_check_sets_the_longer_run_against_the_budget_runs_interval(
     push = Scope(tasks=("push",), rewards=("sparse",))
     profile = dataclasses.replace(
         PROFILE, table1=push, table1_tqc=Scope(tasks=()), rq4=push, rq5=push, ablation=push,
-        budget=push, budget_factor=4,
+        budget=push, budget_factor=4, budget_ratios=(1.0, 0.5),
     )  # fmt: skip
     store = RunStore(tmp_path)
     for entry in build_grid(profile):
-        success = longer if entry.sections == ("budget",) else 0.5
+        ratio = entry.spec.data.expert_ratio
+        # On expert data the longer run scores `longer`; on the mixture it changes nothing.
+        success = 0.5 if ratio == 1.0 else 0.3
+        if entry.sections == ("budget",) and ratio == 1.0:
+            success = longer
         _write_result(store, entry.spec, {"success_rate": success, "mean_return": -9.0,
                                           "episodes": 200})  # fmt: skip
-    (row,) = budget.budget_table(tables.load_runs(profile, tmp_path)).itertuples()
-    assert (row.task, row.seed, row.steps, row.longer_steps) == ("push", 0, 10, 40)
+    table = budget.budget_table(tables.load_runs(profile, tmp_path))
+    row, mixed = table.sort_values("expert_ratio", ascending=False).itertuples()
+    assert (row.task, row.seed, row.expert_ratio, row.steps, row.longer_steps) == (
+        "push", 0, 1.0, 10, 40,
+    )  # fmt: skip
     assert row.success == 50.0 and row.longer_success == pytest.approx(100 * longer)
     low, high = tables.wilson_ci(0.5, 200)
     assert (row.success_ci_low, row.success_ci_high) == pytest.approx((100 * low, 100 * high))
     assert row.within is within and row.change == pytest.approx(100 * longer - 50)
-    assert ("| yes |" if within else "| **no** |") in budget.budget_markdown(
-        budget.budget_table(tables.load_runs(profile, tmp_path))
-    )
+    # The mixture's check stands beside RQ5's run of the same mixture, not Table 1's.
+    assert (mixed.expert_ratio, mixed.success, mixed.change, mixed.within) == (0.5, 30.0, 0, True)
+    text = budget.budget_markdown(table)
+    assert ("| 100 | 10 | 50.0 " in text) and ("| 50 | 10 | 30.0 " in text)
+    assert text.count("| **no** |") == (0 if within else 1)
 
 
 def test_fidelity_sets_each_gcdt_cell_against_the_papers_targets_beside_its_data(tmp_path):

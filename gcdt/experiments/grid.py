@@ -451,10 +451,13 @@ def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
                             add(section, run_spec(p, method, task, reward, seed, data))
                     elif section == "budget":
                         if seed == p.seeds[0]:  # one seed: the check, not a cell
-                            spec = run_spec(
-                                p, "gcdt", task, reward, seed, full, budget_factor=p.budget_factor
-                            )
-                            add(section, spec)
+                            for ratio in p.budget_ratios:
+                                data = data_spec(p, task, p.dataset_size, ratio)
+                                spec = run_spec(
+                                    p, "gcdt", task, reward, seed, data,
+                                    budget_factor=p.budget_factor,
+                                )  # fmt: skip
+                                add(section, spec)
                     elif section == "ablation":
                         for method in ABLATION_METHODS:
                             add(section, run_spec(p, method, task, reward, seed, full))

@@ -2,9 +2,9 @@
 
 A profile that trains for a fixed number of gradient steps instead of the paper's epochs
 (`Profile.train_steps`) justifies it with its `budget` section: GC-DT on the first seed,
-trained `Profile.budget_factor` times longer, beside Table 1's run of the same task, reward
-and seed. The budget holds when the longer run's success lies within the 95 % interval of
-the budget run's evaluation.
+trained `Profile.budget_factor` times longer, beside the grid's run of the same task, reward,
+seed and data (Table 1's at 100 % expert data, RQ5's at a mixture's share). The budget holds
+when the longer run's success lies within the 95 % interval of the budget run's evaluation.
 """
 
 from __future__ import annotations
@@ -13,29 +13,36 @@ import pandas as pd
 
 from gcdt.report.tables import TASK_NAMES, aggregate
 
+#: The sections whose runs are the budget runs a longer one is set against.
+_CELLS = {"table1", "rq4", "rq5"}
+
 
 def budget_table(runs: pd.DataFrame) -> pd.DataFrame:
-    """Per task, reward and seed of the check: the budget run's and the longer run's steps and
-    success with its 95 % interval, the change, and whether the longer run's success lies
-    within the budget run's interval (empty without a budget section)."""
+    """Per task, reward, seed and expert share of the check: the budget run's and the longer
+    run's steps and success with its 95 % interval, the change, and whether the longer run's
+    success lies within the budget run's interval (empty without a budget section)."""
     longer = runs[runs["sections"].apply(lambda s: "budget" in s)]
+    cells = runs["sections"].apply(lambda s: bool(_CELLS & set(s)))
     rows = []
     for r in longer.itertuples():
         base = runs[
-            runs["sections"].apply(lambda s: "table1" in s)
+            cells
             & (runs["method"] == r.method)
             & (runs["task"] == r.task)
             & (runs["reward"] == r.reward)
             & (runs["seed"] == r.seed)
+            & (runs["size"] == r.size)
+            & (runs["expert_ratio"] == r.expert_ratio)
         ]
         if base.empty:
-            continue  # Table 1's run is not done yet
+            continue  # the budget run is not done yet
         b, x = aggregate(base, ["task"]).iloc[0], aggregate(longer.loc[[r.Index]], ["task"]).iloc[0]
         rows.append(
             {
                 "task": r.task,
                 "reward": r.reward,
                 "seed": r.seed,
+                "expert_ratio": r.expert_ratio,
                 "steps": int(base["train_steps"].iloc[0]),
                 "success": b["success_mean"],
                 "success_ci_low": b["success_ci_low"],
@@ -54,13 +61,14 @@ def budget_table(runs: pd.DataFrame) -> pd.DataFrame:
 def budget_markdown(table: pd.DataFrame) -> str:
     """`budget_table` as Markdown: one row per check."""
     lines = [
-        "| task | reward | seed | steps | success % [95 %] | longer: steps | success % [95 %] "
-        "| change (pts) | within the budget run's interval |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| task | reward | seed | expert % | steps | success % [95 %] | longer: steps "
+        "| success % [95 %] | change (pts) | within the budget run's interval |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in table.itertuples():
         lines.append(
-            f"| {TASK_NAMES[r.task]} | {r.reward} | {r.seed} | {r.steps:,} | {r.success:.1f} "
+            f"| {TASK_NAMES[r.task]} | {r.reward} | {r.seed} | {100 * r.expert_ratio:.0f} | "
+            f"{r.steps:,} | {r.success:.1f} "
             f"[{r.success_ci_low:.1f}, {r.success_ci_high:.1f}] | {r.longer_steps:,} | "
             f"{r.longer_success:.1f} [{r.longer_ci_low:.1f}, {r.longer_ci_high:.1f}] | "
             f"{r.change:+.1f} | {'yes' if r.within else '**no**'} |"

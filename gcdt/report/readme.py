@@ -218,7 +218,8 @@ def readme_block(profile: Profile) -> str:
     if not checks.empty:
         parts += [
             f"**Budget check**: GC-DT trained {profile.budget_factor} times longer than the "
-            "profile's fixed budget, beside Table 1's run (success on the same evaluation):",
+            "profile's fixed budget, beside the grid's run of the same data (success on the "
+            "same evaluation):",
             budget.budget_markdown(checks),
         ]
     ablation = tables.ablation_table(runs)

@@ -309,6 +309,15 @@ def test_directions_check_the_papers_floor_at_a_quarter_of_expert_data(tmp_path)
     floor = "RQ5, Push sparse: above 80 % success at 25 % expert"
     assert table.loc[floor].tolist() == ["yes", "no (42.5 %)", False]
     assert not any(c.startswith("RQ5, Reach sparse: above") for c in table.index)  # not claimed
+    # A grid still running: without the 0 % runs the trend waits, the floor does not.
+    partial = RunStore(tmp_path / "partial")
+    for entry in build_grid(profile):
+        if not (entry.spec.data and entry.spec.data.expert_ratio == 0.0):
+            _write_result(partial, entry.spec, {"success_rate": _success(entry.spec),
+                                                "mean_return": 0.0, "episodes": 20})  # fmt: skip
+    table = tables.directions(tables.load_runs(profile, tmp_path / "partial"))
+    assert table.set_index("comparison").loc[floor].tolist() == ["yes", "no (42.5 %)", False]
+    assert not table["comparison"].str.contains("at 0 % expert").any()
 
 
 def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):

@@ -762,6 +762,13 @@ def test_large_profile_keeps_the_papers_data_and_evaluation():
         dataclasses.replace(large, train_steps=None)
     with pytest.raises(GcdtError, match=r"budget_ratios must be expert shares in \[0, 1\]"):
         dataclasses.replace(large, budget_ratios=(1.5,))
+    # A share RQ5 does not run, or a task it does not cover, has no base run to compare with.
+    with pytest.raises(GcdtError, match=r"budget check at 60% expert data has no rq5 run"):
+        dataclasses.replace(large, budget_ratios=(1.0, 0.6))
+    with pytest.raises(GcdtError, match=r"no rq5 run of its data for reach/sparse"):
+        dataclasses.replace(large, budget=Scope(tasks=("reach", "push"), rewards=("sparse",)))
+    with pytest.raises(GcdtError, match=r"no table1 run of its data for push/sparse"):
+        dataclasses.replace(large, table1=Scope(tasks=("reach",)))
     with pytest.raises(GcdtError, match=r"from the published agents \(tqc_agents\) or from grid"):
         dataclasses.replace(large, table1_tqc=Scope())
 

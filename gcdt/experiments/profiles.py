@@ -201,6 +201,23 @@ class Profile:
                 f"profile {self.name!r}: budget_ratios must be expert shares in [0, 1], got "
                 f"{self.budget_ratios!r}"
             )
+        # Each longer run is set against the grid's run of its data (Table 1's at 100 % expert
+        # data, RQ5's at a mixture): without one its row would be missing from the check.
+        for ratio in self.budget_ratios:
+            section, scope = ("table1", self.table1) if ratio == 1.0 else ("rq5", self.rq5)
+            share = ratio == 1.0 or ratio in self.rq5_ratios
+            uncovered = [
+                f"{task}/{reward}"
+                for task in self.budget.tasks
+                for reward in self.budget.rewards
+                if not (share and task in scope.tasks and reward in scope.rewards)
+            ]
+            if uncovered:
+                raise GcdtError(
+                    f"profile {self.name!r}: the budget check at {ratio:.0%} expert data has "
+                    f"no {section} run of its data for {', '.join(uncovered)}: add the share "
+                    f"and tasks to {section}'s grid or drop {ratio!r} from budget_ratios"
+                )
         if self.budget.tasks and (self.train_steps is None or self.budget_factor < 2):
             raise GcdtError(
                 f"profile {self.name!r}: the budget check needs fixed train_steps and a "

@@ -708,6 +708,7 @@ class Sweep(_Command, _Progress):
     )
     retries: int = setting(RETRIES, "times a failed run is tried again", minimum=0)
     only: str | None = setting(None, "one section of the grid", choices=SECTIONS)
+    task: str | None = setting(None, "one task's runs of the grid", choices=TASKS)
     workers: int | None = setting(None, "parallel runs (default: cores)", minimum=1)
     dry_run: bool = setting(False, "list the runs, their state and estimated cost")
     estimate_on: str = setting(
@@ -736,6 +737,7 @@ class Sweep(_Command, _Progress):
             storage=self.storage,
             retries=self.retries,
             only=self.only,
+            task=self.task,
             workers=self.workers,
             progress=not self.no_progress,
         )
@@ -754,7 +756,7 @@ class Sweep(_Command, _Progress):
         # Reads the bench JSON and the results once.
         costs = CostModel.measured(profile.name, on=self.estimate_on)
         store = RunStore(results_dir(profile.name) / "runs")
-        planned, warnings = plan(profile, store, self.only, costs)
+        planned, warnings = plan(profile, store, self.only, costs, task=self.task)
         for warning in warnings:
             print(f"warning: {warning}", file=sys.stderr)
         for p in planned:

@@ -552,6 +552,35 @@ def test_dry_run_lists_runs_with_state_and_cost(capsys):
     )
 
 
+def test_a_sweep_of_one_task_runs_its_runs_longest_first(capsys, monkeypatch, tmp_path):
+    """`--task` keeps one task's runs (an unknown task is refused); the sweep hands them to the
+    backend longest first, so that no worker is left alone with a long run at the end."""
+    from gcdt.cli import main
+    from gcdt.experiments.costs import CostModel
+    from gcdt.experiments.sweep import plan
+
+    assert main(["sweep", "--profile", "standard", "--dry-run", "--task", "push"]) == 0
+    runs = [line for line in capsys.readouterr().out.splitlines() if " min  " in line]
+    assert runs and all(" push/" in line for line in runs)
+    everything, _ = plan(get_profile("standard"), RunStore(tmp_path), costs=CostModel())
+    assert len(runs) == sum(p.entry.spec.task == "push" for p in everything) < len(everything)
+    with pytest.raises(GcdtError, match="unknown task 'pusj'"):
+        plan(TINY, RunStore(tmp_path), task="pusj")
+
+    handed: list = []
+
+    def record(runner, todo, store, summary, retries, progress):
+        handed.extend(todo)
+
+    # The package's `sweep` is the function, which hides its module.
+    monkeypatch.setattr(sys.modules["gcdt.experiments.sweep"], "_run_all", record)
+    summary = sweep(TINY, store_root=tmp_path / "runs", task="reach", workers=1, progress=False)
+    costs = [p.estimate_seconds for p in handed]
+    assert len(handed) == len(build_grid(TINY))
+    assert costs == sorted(costs, reverse=True) and costs[0] > costs[-1]
+    assert summary.rerun.endswith("--task reach")
+
+
 def test_the_epoch_budget_is_estimated_from_the_collecting_policys_episode_length(
     tmp_path, monkeypatch
 ):

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from gcdt.baselines.tqc_her import RUN_JSON
+from gcdt.envs import get_task
 from gcdt.errors import GcdtError
 from gcdt.experiments.costs import CostModel
 from gcdt.experiments.grid import GridEntry, build_grid
@@ -110,14 +111,19 @@ def plan(
     only: str | None = None,
     costs: CostModel | None = None,
     methods: Sequence[str] | None = None,
+    task: str | None = None,
 ) -> tuple[list[PlannedRun], list[str]]:
-    """Every run of the grid (of section `only`, of `methods`) with its stored state and
-    estimated cost; warnings for files that are not trusted (corrupt results, JSON files of no
-    run of this grid)."""
+    """Every run of the grid (of section `only`, of `methods`, of `task`) with its stored state
+    and estimated cost; warnings for files that are not trusted (corrupt results, JSON files of
+    no run of this grid)."""
+    if task is not None:
+        get_task(task)  # an unknown task is refused, not read as an empty grid
     costs = costs or CostModel.measured(profile.name)
     planned, warnings, trained = [], [], set()
     for entry in build_grid(profile, only):
         if methods is not None and entry.spec.method not in methods:
+            continue
+        if task is not None and entry.spec.task != task:
             continue
         key = entry.spec.key()
         stored = store.read(key)
@@ -131,7 +137,7 @@ def plan(
         trained.add(entry.spec.training_key())
         estimate = costs.estimate(entry.spec, train=train)
         planned.append(PlannedRun(entry, key, state, problem, estimate))
-    if only is None and methods is None:
+    if only is None and methods is None and task is None:
         keys = {p.key for p in planned}
         warnings += [
             f"{p} is not a result of this grid: ignored" for p in store.foreign_files(keys)
@@ -195,11 +201,14 @@ def sweep(
     retries: int = RETRIES,
     only: str | None = None,
     methods: Sequence[str] | None = None,
+    task: str | None = None,
     workers: int | None = None,
     store_root: str | Path | None = None,
     progress: bool = True,
 ) -> SweepSummary:
-    """Run every run of `profile` (of section `only`, of `methods`) not done yet.
+    """Run every run of `profile` (of section `only`, of `methods`, of `task`) not done yet,
+    the longest first (by the estimate), so that no worker is left alone with a long run at the
+    end.
 
     Bad input (backend, an unreachable `address`, a cluster too small for one run, a `storage`
     URI that cannot be written) is refused before anything is written.
@@ -220,12 +229,13 @@ def sweep(
     store = RunStore(store_root or results_dir(profile.name) / "runs")
     store.remove_partial_files()
     # The estimates matter to --dry-run only: defaults, without reading every result file.
-    planned, warnings = plan(profile, store, only, CostModel(), methods=methods)
+    planned, warnings = plan(profile, store, only, CostModel(), methods=methods, task=task)
     summary = SweepSummary(profile.name, planned, warnings=warnings)
     summary.skipped = [p.key for p in planned if p.state == "done"]
     summary.waiting = [p.key for p in planned if p.state == "waiting"]
-    summary.rerun = rerun_command(profile.name, backend, address, storage, retries, only)
+    summary.rerun = rerun_command(profile.name, backend, address, storage, retries, only, task)
     todo = [p for p in planned if p.state not in ("done", "waiting")]
+    todo.sort(key=lambda p: -p.estimate_seconds)  # stable: ties keep the grid's order
     workers = workers or default_workers(profile)
     started = time.perf_counter()
     if todo:
@@ -285,11 +295,13 @@ def rerun_command(
     storage: str | None,
     retries: int,
     only: str | None,
+    task: str | None = None,
 ) -> str:
     """The `gcdt sweep` command of these options (it runs again what is not done)."""
     argv = ["gcdt", "sweep", "--profile", profile]
     for flag, value, default in (
         ("--only", only, None),
+        ("--task", task, None),
         ("--backend", backend, "local"),
         ("--address", address, None),
         ("--storage", storage, None),

@@ -228,7 +228,8 @@ def sweep(
         ArtifactStorage(storage).check_writable()
     store = RunStore(store_root or results_dir(profile.name) / "runs")
     store.remove_partial_files()
-    # The estimates matter to --dry-run only: defaults, without reading every result file.
+    # Defaults, without reading every result file: enough to order the runs longest first
+    # (the dry run's absolute estimates read the measured rates).
     planned, warnings = plan(profile, store, only, CostModel(), methods=methods, task=task)
     summary = SweepSummary(profile.name, planned, warnings=warnings)
     summary.skipped = [p.key for p in planned if p.state == "done"]
@@ -295,7 +296,7 @@ def rerun_command(
     storage: str | None,
     retries: int,
     only: str | None,
-    task: str | None = None,
+    task: str | None,
 ) -> str:
     """The `gcdt sweep` command of these options (it runs again what is not done)."""
     argv = ["gcdt", "sweep", "--profile", profile]

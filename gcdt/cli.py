@@ -773,6 +773,12 @@ class Sweep(_Command, _Progress):
                 f"section {section}: {runs} runs to run{also}, about {seconds / 3600:.1f} h of work"
             )
         print(f"datasets and TQC+HER experts to make: about {shared / 3600:.1f} h of work")
+        if costs.cpu:
+            cpu, factor, n = costs.cpu
+            print(
+                f"this CPU ({cpu}) takes {factor:.2f}x as long per gradient step as the other"
+                f" machines of the finished runs (median of {n} rates): their rates are scaled"
+            )
         if waiting := [p for p in todo if p.state == "waiting"]:
             agents = sorted({p.problem for p in waiting})
             print(f"{len(waiting)} of them wait for published agents: {'; '.join(agents)}")

@@ -80,6 +80,16 @@ def cpu_model() -> str:
     return _cpuinfo_field("model name") or platform.processor() or platform.machine()
 
 
+def cpu_signature() -> str:
+    """The CPU as run timings depend on it: its model and the vector instructions torch's
+    kernels use here (e.g. "AMD EPYC, AVX2"). Virtual machines often report the same model
+    for CPUs whose matmuls differ several-fold, AVX2 against AVX-512, so the model alone is
+    not enough."""
+    import torch  # only when asked, as in `machine_info`
+
+    return f"{cpu_model()}, {torch.backends.cpu.get_cpu_capability()}"
+
+
 def cpu_bf16() -> bool | None:
     """Whether the CPU computes bfloat16 natively (AVX512-BF16 or AMX); None if unknown.
 

@@ -259,6 +259,7 @@ class TrainResult:
     seconds: float
     final_loss: float
     history: list[dict[str, float]] = field(default_factory=list)
+    resumed_from: int = 0  # the step this call began at: `seconds` paid for the steps after it
 
 
 def train(
@@ -278,6 +279,7 @@ def train(
     """
     out_dir = Path(out_dir)
     identity, state = _start(dataset, cfg, out_dir, resume)
+    first = state.step
     sampler = WindowSampler(dataset, cfg, state.state_mean, state.state_std, state.device)
     total = identity["total_steps"]
     end = total if stop_after is None else min(total, state.step + stop_after)
@@ -301,7 +303,7 @@ def train(
     final_loss = state.history[-1]["loss"] if state.history else float("nan")
     seconds = time.perf_counter() - log.started
     return TrainResult(
-        checkpoints.path, checkpoints.log, state.step, seconds, final_loss, state.history
+        checkpoints.path, checkpoints.log, state.step, seconds, final_loss, state.history, first
     )
 
 

@@ -37,6 +37,7 @@ from gcdt.experiments import (
 from gcdt.experiments.grid import RUN_SCHEMA, data_spec
 from gcdt.experiments.profiles import SMOKE, Scope, target_seeds
 from gcdt.paths import REPO_ROOT
+from gcdt.provenance import cpu_signature
 from gcdt.regions import GoalRegion
 from gcdt.training import TrainConfig
 
@@ -291,6 +292,20 @@ def test_local_sweep_runs_every_run_once(local_sweep):
     assert {(m, g) for m in ("gcdt", "bc") for g in TINY.goal_regions} <= regions
     again = sweep(TINY, store_root=root / "runs", workers=2, progress=False)
     assert len(again.skipped) == 13 and not again.done and not again.failed
+    # Each run records its CPU and the gradient steps its own time paid for: the runs that
+    # share a checkpoint trained its steps once between them, the others reused it.
+    raw = [json.loads(p.read_text()) for p in sorted((root / "runs").glob("*.json"))]
+    assert {r["execution"]["cpu"] for r in raw} == {cpu_signature()}
+    by_training: dict[str, list[dict]] = {}
+    for r in raw:
+        if r["spec"]["method"] == "tqc":
+            assert r["execution"]["trained_steps"] is None
+        else:
+            by_training.setdefault(RunSpec.from_dict(r["spec"]).training_key(), []).append(r)
+    assert len(by_training) == 8 and any(len(runs) == 3 for runs in by_training.values())
+    for runs in by_training.values():
+        paid = sorted(r["execution"]["trained_steps"] for r in runs)
+        assert paid == [0] * (len(runs) - 1) + [runs[0]["training"]["steps"]]
 
 
 def _start(obs) -> tuple[float, ...]:
@@ -688,6 +703,70 @@ def test_costs_learn_every_rate_from_finished_runs(tmp_path, monkeypatch):
     assert costs.rate("bc_step", "reach") == pytest.approx(1.5 / 1_000)
     assert costs.rate("bc_step", "push") == pytest.approx(2 / 1_000)
     assert costs.rate("bc_step", "pick_and_place") == pytest.approx((1.5 + 2) / 2 / 1_000)
+
+
+def test_costs_follow_the_data_shape_this_cpu_and_the_steps_a_run_paid_for(
+    tmp_path, monkeypatch, capsys
+):
+    """A GC-DT step's rate is measured per task and data shape; runs on this kind of CPU set
+    its rates and scale the other machines' by their ratio; a resumed run's rate divides its
+    time by the steps it trained, and a reused checkpoint measures nothing."""
+    from gcdt.cli import main
+    from gcdt.experiments import costs as costs_module
+    from gcdt.experiments.costs import CostModel
+
+    monkeypatch.setattr(costs_module, "REPO_ROOT", tmp_path / "repository")
+    monkeypatch.setattr(costs_module, "cpu_signature", lambda: "Test CPU, AVX2")
+    monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path))
+    runs = tmp_path / "results" / "large" / "runs"
+    runs.mkdir(parents=True)
+
+    def run(name, task, ratio, seconds, steps=1_000, **execution):
+        spec = {"method": "gcdt", "task": task, "data": {"expert_ratio": ratio}}
+        result = {
+            "status": "done",
+            "spec": {**spec, "eval_timesteps": 0, "eval_seeds": []},
+            "training": {"steps": 1_000},
+            "execution": {"seconds": {"train_seconds": seconds}, **execution},
+        }
+        (runs / f"{name}.json").write_text(json.dumps(result))
+
+    run("push_expert", "push", 1.0, 60.0)  # another machine's (older results name no CPU)
+    run("push_mixed", "push", 0.25, 120.0, cpu="Other CPU, AVX512")
+    run("pick_expert", "pick_and_place", 1.0, 70.0)
+    costs = CostModel.measured("large")
+    assert costs.rate("dt_step", "push", "short") == pytest.approx(0.06)
+    assert costs.rate("dt_step", "push", "full") == pytest.approx(0.12)
+    # Reach has no run: the pooled rate of its shape, not another shape's.
+    assert costs.rate("dt_step", "reach", "full") == pytest.approx(0.12)
+    assert costs.rate("dt_step", "reach", "short") == pytest.approx(0.065)
+    assert costs.cpu is None
+    # This CPU: a resumed run trained 500 of its 1,000 steps in its 100 s, and a run that
+    # reused a checkpoint trained none in 30 s (it loaded one).
+    run("push_expert_here", "push", 1.0, 100.0, cpu="Test CPU, AVX2", trained_steps=500)
+    run("push_reused_here", "push", 1.0, 30.0, cpu="Test CPU, AVX2", trained_steps=0)
+    costs = CostModel.measured("large")
+    assert costs.rate("dt_step", "push", "short") == pytest.approx(0.2)
+    assert costs.source["dt_step:push:short"] == "median of 1 finished large runs on this CPU"
+    cpu, factor, n = costs.cpu
+    assert (cpu, n) == ("Test CPU, AVX2", 1) and factor == pytest.approx(0.2 / 0.06)
+    assert costs.rate("dt_step", "push", "full") == pytest.approx(0.12 * factor)
+    assert costs.rate("dt_step", "pick_and_place", "short") == pytest.approx(0.07 * factor)
+    assert costs.source["dt_step:push:full"].endswith(f"x {factor:.2f} for this CPU")
+    assert costs.rate("dt_eval_step", "push") == CostModel().rates["dt_eval_step"]  # unscaled
+    # The estimate of a run on mixed Push data takes its steps at the scaled mixed rate.
+    spec = next(
+        e.spec
+        for e in build_grid(get_profile("large"), only="rq5")
+        if e.spec.task == "push" and e.spec.data.expert_ratio == 0.25
+    )
+    steps = dataclasses.replace(spec, train_steps=1_000)
+    none = dataclasses.replace(spec, train_steps=0)
+    assert costs.estimate(steps) - costs.estimate(none) == pytest.approx(1_000 * 0.12 * factor)
+    assert main(["sweep", "--profile", "large", "--dry-run", "--only", "rq5"]) == 0
+    assert "this CPU (Test CPU, AVX2) takes 3.33x as long per gradient step" in (
+        capsys.readouterr().out
+    )
 
 
 #: The paper profile's structure at toy sizes: TQC+HER experts, expert data collected by a

@@ -56,7 +56,8 @@ def test_resumed_run_equals_uninterrupted(make_dataset, tmp_path):
     part = train(ds, cfg, tmp_path / "split", stop_after=13, progress=False)
     assert part.steps == 13 and not load_checkpoint(part.checkpoint)["complete"]
     resumed = train(ds, cfg, tmp_path / "split", resume=True, progress=False)
-    assert resumed.steps == 30
+    # The resumed call paid for the steps after the checkpoint only (what a rate divides by).
+    assert resumed.steps == 30 and (full.resumed_from, resumed.resumed_from) == (0, 13)
     a, b = load_checkpoint(full.checkpoint), load_checkpoint(resumed.checkpoint)
     assert a["complete"] and b["complete"]
     for key in a["model"]:

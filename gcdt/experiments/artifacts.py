@@ -187,6 +187,13 @@ def checkpoint_dir(spec: RunSpec) -> Path:
 def checkpoint(spec: RunSpec) -> Path:
     """The finished training checkpoint of offline run `spec`: trained first if it does not
     exist yet, resumed if an earlier training was interrupted."""
+    return trained_checkpoint(spec)[0]
+
+
+def trained_checkpoint(spec: RunSpec) -> tuple[Path, int]:
+    """`checkpoint(spec)`, and the gradient steps this call trained to finish it: 0 where it
+    was finished before (here or on another node), fewer than the run's where it resumed.
+    What the training time of the call paid for, and so what a measured rate divides by."""
     from gcdt.checkpoint import CHECKPOINT_NAME, load_checkpoint
     from gcdt.training import train
 
@@ -194,12 +201,14 @@ def checkpoint(spec: RunSpec) -> Path:
     path = out / CHECKPOINT_NAME
     # Only a complete checkpoint is uploaded: its presence there marks it finished.
     name = str(path.relative_to(grid_dir()))
+    trained = 0
     with _locked(spec.training_key()):
         ckpt = load_checkpoint(path) if path.exists() else None
         if (ckpt is None or not ckpt["complete"]) and _fetched([name]):
             ckpt = load_checkpoint(path)
         if ckpt is None or not ckpt["complete"]:
             cfg = spec.train_config()  # the config the run's key hashes
-            train(dataset(spec.data), cfg, out, resume=ckpt is not None, progress=False)
+            done = train(dataset(spec.data), cfg, out, resume=ckpt is not None, progress=False)
+            trained = done.steps - done.resumed_from
             _publish([name])
-    return path
+    return path, trained

@@ -19,6 +19,7 @@ from gcdt.envs import TASKS
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import OFFLINE_METHODS, DataSpec, RunSpec
 from gcdt.paths import REPO_ROOT, outputs_root
+from gcdt.provenance import cpu_signature
 
 #: Reference-machine rates (seconds per unit), used when neither results/bench/ nor finished
 #: runs say better: `benchmarks/run_costs.py` (two runs in parallel, one torch thread each,
@@ -33,6 +34,9 @@ DEFAULT_RATES = {
     "tqc_step:cpu": 1 / 61.4,  # the same with the cpu config
     "run_overhead": 5.0,  # process start, imports, env creation
 }
+#: The rates a CPU's speed sets most: gradient steps, whose matmuls differ several-fold
+#: between CPUs that virtual machines report under one model name (AVX2 against AVX-512).
+STEP_RATES = ("dt_step", "bc_step")
 #: Mean expert episode length assumed to turn transitions into the authors' epochs where no
 #: published evaluation of the collecting policy says better (`expert_episode_length`).
 ASSUMED_EPISODE_LENGTH = 30
@@ -45,14 +49,19 @@ class CostModel:
     rates: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_RATES))
     source: dict[str, str] = field(default_factory=lambda: dict.fromkeys(DEFAULT_RATES, "default"))
     gpu: str | None = None  # the GPU the rates were measured on (`measured(on="cuda")`)
+    # This CPU, the factor its runs' gradient steps take over other machines', and from how
+    # many rates (`_this_cpu`); None where no finished run measured it.
+    cpu: tuple[str, float, int] | None = None
 
     @classmethod
     def measured(cls, profile: str | None = None, on: str = "cpu") -> CostModel:
         """Defaults, overridden by benchmark JSON, overridden by finished runs' timings; with
         `profile`, a rate its own finished runs measure is theirs alone (its data, budgets and
         machine), the other profiles' runs filling in the rest. Offline gradient steps are
-        also measured per task (`rate`). `on="cuda"`: the GPU
-        benchmarks' rates instead (`_gpu`), the CPU's where they measure nothing."""
+        also measured per task and data shape (`rate`), and per CPU: runs on this machine's
+        kind of CPU set its rates, and scale those measured elsewhere (`_this_cpu`).
+        `on="cuda"`: the GPU benchmarks' rates instead (`_gpu`), the CPU's where they
+        measure nothing."""
         model = cls()
         bench = REPO_ROOT / "results" / "bench"
         if on == "cuda":
@@ -74,30 +83,56 @@ class CostModel:
                 ("eval_step", "bc_eval_steps_per_second", True),
             ):
                 model._set(name, 1 / runs[key] if invert else runs[key], "run_costs.json")
-        samples: dict[str, list[float]] = {}
-        own: dict[str, list[float]] = {}  # the same, from `profile`'s runs
+        # Samples by (on this CPU, of `profile`): a profile's runs outrank the others, and
+        # this CPU's outrank every other machine's.
+        samples: dict[tuple[bool, bool], dict[str, list[float]]] = {
+            (here, own): {} for here in (False, True) for own in (False, True)
+        }
+        this_cpu = cpu_signature()
         # The published runs and, in a reproduction, its own (the same file is read once).
         roots = dict.fromkeys(root.resolve() for root in (REPO_ROOT, outputs_root()))
         for path in (p for root in roots for p in (root / "results").glob("*/runs/*.json")):
             try:
                 result = json.loads(path.read_text())
                 if result.get("status") == "done":
-                    _samples(result, samples)
-                    if path.parent.parent.name == profile:
-                        _samples(result, own)
+                    group = (
+                        result["execution"].get("cpu") == this_cpu,
+                        path.parent.parent.name == profile,
+                    )
+                    for name, value in _samples(result):
+                        samples[group].setdefault(name, []).append(value)
             except (OSError, ValueError, KeyError, TypeError, ZeroDivisionError):
                 continue  # an unreadable file is the store's business, not the estimate's
-        # A task's own rate ("dt_step:push") outranks the pooled one: a step's cost follows the
-        # data's episode lengths (the training benchmark's `*_short` and `*_tqc` cases), and a
-        # profile's runs of one task would otherwise set every task's rate.
-        for pooled in (True, False):
-            for found, whose in ((samples, ""), (own, f" {profile}")):
-                for name, values in found.items():
-                    if (":" not in name or name.startswith("tqc_step")) == pooled:
-                        model._set(
-                            name, median(values), f"median of {len(values)} finished{whose} runs"
-                        )
+        for here in (False, True):
+            if here:  # every other machine's rates are in: scale them to this CPU first
+                model._this_cpu(this_cpu, _merged(samples, True), _merged(samples, False))
+            for own in (False, True):
+                whose = f" {profile}" if own else ""
+                where = " on this CPU" if here else ""
+                for name, values in samples[here, own].items():
+                    n = len(values)
+                    model._set(name, median(values), f"median of {n} finished{whose} runs{where}")
         return model
+
+    def _this_cpu(
+        self, cpu: str, here: dict[str, list[float]], elsewhere: dict[str, list[float]]
+    ) -> None:
+        """Scale the gradient-step rates measured on other CPUs by how much slower or faster
+        this one is: the median ratio of the two over the rates both measure, each of one
+        task and data shape (pooled rates would compare different mixes of runs)."""
+        ratios = [
+            median(here[name]) / median(elsewhere[name])
+            for name in here.keys() & elsewhere.keys()
+            if name.split(":")[0] in STEP_RATES and _most_specific(name)
+        ]
+        if not ratios:
+            return
+        factor = median(ratios)
+        self.cpu = (cpu, factor, len(ratios))
+        for name in self.rates:
+            if name.split(":")[0] in STEP_RATES:
+                self.rates[name] *= factor
+                self.source[name] += f", x {factor:.2f} for this CPU"
 
     def _gpu(self, bench: Path) -> CostModel:
         """Rates measured on a GPU machine by `benchmarks/*.py --device cuda`. Finished runs
@@ -141,13 +176,16 @@ class CostModel:
             return seconds + (spec.tqc.steps or 0) * rate
         if not train:
             return seconds
+        if spec.method == "bc":
+            return seconds + offline_steps(spec) * self.rate("bc_step", spec.task)
         return seconds + offline_steps(spec) * self.rate(
-            "bc_step" if spec.method == "bc" else "dt_step", spec.task
+            "dt_step", spec.task, window_shape(spec.data.expert_ratio)
         )
 
-    def rate(self, name: str, task: str) -> float:
-        """Seconds per unit of `name` on `task`: the task's own measured rate, else the pooled."""
-        return self.rates.get(f"{name}:{task}", self.rates[name])
+    def rate(self, name: str, task: str, shape: str | None = None) -> float:
+        """Seconds per unit of `name` on `task` with data of `shape` (`window_shape`): the
+        most specific rate measured, down to the pooled one (`rate_names`)."""
+        return next(self.rates[n] for n in rate_names(name, task, shape) if n in self.rates)
 
     def collection(self, transitions: int) -> float:
         return transitions * self.rates["collect_step"]
@@ -202,20 +240,58 @@ def expert_episode_length(data: DataSpec) -> float:
     return _published_length(path) or ASSUMED_EPISODE_LENGTH
 
 
-def _samples(result: dict, samples: dict[str, list[float]]) -> None:
-    spec, seconds = result["spec"], result["execution"]["seconds"]
+def _merged(
+    samples: dict[tuple[bool, bool], dict[str, list[float]]], here: bool
+) -> dict[str, list[float]]:
+    """The samples of this CPU (`here`) or of the others, a profile's own outranking the rest."""
+    return {**samples[here, False], **samples[here, True]}
+
+
+def window_shape(expert_ratio: float) -> str:
+    """What a Decision Transformer step's cost follows besides the CPU: "full" where the data
+    has a random part, whose full-length episodes fill every K-step window, else "short"
+    (expert episodes shorter than K: the model skips their windows' padding). Measured: a
+    step on random data costs about twice one on TQC-expert data."""
+    return "full" if expert_ratio < 1 else "short"
+
+
+def rate_names(name: str, task: str, shape: str | None = None) -> list[str]:
+    """The rates that may stand for `name` on `task` with data of `shape`, most specific
+    first: "dt_step:push:full", "dt_step:full", "dt_step:push", "dt_step"."""
+    shaped = [f"{name}:{task}:{shape}", f"{name}:{shape}"] if shape else []
+    return [*shaped, f"{name}:{task}", name]
+
+
+def _most_specific(name: str) -> bool:
+    """Whether rate `name` is of one task and, for DT steps, one data shape."""
+    return name.count(":") == (2 if name.startswith("dt_step") else 1)
+
+
+def _samples(result: dict) -> list[tuple[str, float]]:
+    """The rates one finished run measures, under every name they may stand for."""
+    spec, execution = result["spec"], result["execution"]
+    seconds = execution["seconds"]
     training = result.get("training", {})
+    found: list[tuple[str, float]] = []
     if spec["method"] == "tqc":
         # Env steps with their gradient steps and learning-curve evaluations: what a run costs.
         if training.get("env_steps", 0) >= 1000 and seconds.get("train_seconds", 0) > 1:
             name = f"tqc_step:{spec['tqc']['config']}"
-            samples.setdefault(name, []).append(seconds["train_seconds"] / training["env_steps"])
-    elif (steps := training.get("steps")) and steps >= 100 and seconds.get("train_seconds", 0) > 1:
-        # (Short runs measure start-up more than steps; a reused checkpoint measures nothing.)
-        name = "bc_step" if spec["method"] == "bc" else "dt_step"
-        for key in (name, f"{name}:{spec['task']}"):
-            samples.setdefault(key, []).append(seconds["train_seconds"] / steps)
+            found.append((name, seconds["train_seconds"] / training["env_steps"]))
+    else:
+        # The steps this run's process trained: fewer than the run's where it resumed a
+        # checkpoint, none where it reused one (older results, without it: all of them).
+        steps = execution.get("trained_steps", training.get("steps"))
+        # (Short runs measure start-up more than steps.)
+        if steps and steps >= 100 and seconds.get("train_seconds", 0) > 1:
+            rate = seconds["train_seconds"] / steps
+            if spec["method"] == "bc":
+                found += [(name, rate) for name in rate_names("bc_step", spec["task"])]
+            else:
+                shape = window_shape(spec["data"]["expert_ratio"])
+                found += [(name, rate) for name in rate_names("dt_step", spec["task"], shape)]
     evaluated = spec["eval_timesteps"] * len(spec["eval_seeds"])
     if seconds.get("evaluate_seconds") and evaluated >= 1000:
         name = "dt_eval_step" if spec["method"] in DT_METHODS else "eval_step"
-        samples.setdefault(name, []).append(seconds["evaluate_seconds"] / evaluated)
+        found.append((name, seconds["evaluate_seconds"] / evaluated))
+    return found

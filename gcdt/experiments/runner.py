@@ -25,7 +25,13 @@ from gcdt.experiments.grid import RUN_SCHEMA, RunSpec
 from gcdt.experiments.storage import STORAGE_ENV
 from gcdt.experiments.store import RunStore
 from gcdt.paths import ARTIFACTS_ENV
-from gcdt.provenance import TRACKED_PACKAGES, git_commit, package_versions, utc_now
+from gcdt.provenance import (
+    TRACKED_PACKAGES,
+    cpu_signature,
+    git_commit,
+    package_versions,
+    utc_now,
+)
 from gcdt.regions import GoalRegion
 
 #: What a TQC+HER learning-curve point keeps (its timings depend on the machine, not the run).
@@ -67,9 +73,10 @@ def run_result(
     torch.set_num_threads(spec.threads)
     started, clock = utc_now(), time.perf_counter()
     timings: dict[str, float] = {}
+    trained_steps = None
     result: dict[str, Any] = {"key": key, "schema": RUN_SCHEMA, "spec": spec.to_dict()}
     try:
-        policy, trained = _trained_policy(spec, timings)
+        policy, trained, trained_steps = _trained_policy(spec, timings)
         result["training"] = trained
         began = time.perf_counter()
         result["evaluations"] = [_evaluate(policy, spec, seed) for seed in spec.eval_seeds]
@@ -81,7 +88,13 @@ def run_result(
         result["error"] = f"{type(err).__name__}: {err}".splitlines()[0]
         result["traceback"] = traceback.format_exc()
     timings["total_seconds"] = round(time.perf_counter() - clock, 3)
-    result["execution"] = _execution(backend, started, timings, torch.get_num_threads())
+    result["execution"] = {
+        **_execution(backend, started, timings, torch.get_num_threads()),
+        "cpu": cpu_signature(),
+        # What `train_seconds` paid for: 0 for a checkpoint made before, part of the run's
+        # steps for a resumed one (the rates of `gcdt sweep --dry-run` divide by it).
+        "trained_steps": trained_steps,
+    }
     return result
 
 
@@ -116,10 +129,13 @@ def _execution(
     }
 
 
-def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict[str, Any]]:
-    """The run's agent as a policy (made if needed), and what its training recorded: the
-    result keeps the learning curve (TQC+HER) or the loss curve and model config (offline),
-    so that every figure can be drawn from results alone, without the artifacts."""
+def _trained_policy(
+    spec: RunSpec, timings: dict[str, float]
+) -> tuple[Any, dict[str, Any], int | None]:
+    """The run's agent as a policy (made if needed), what its training recorded, and the
+    gradient steps this call trained (offline runs; None for TQC+HER). The result keeps the
+    learning curve (TQC+HER) or the loss curve and model config (offline), so that every
+    figure can be drawn from results alone, without the artifacts."""
     began = time.perf_counter()
     if spec.method == "tqc":
         from gcdt.policies.tqc import TQCPolicy
@@ -133,7 +149,7 @@ def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict
             **{k: {f: run[k][f] for f in TQC_CURVE_FIELDS} for k in ("best", "final")},
             "curve": artifacts.tqc_curve(model.parent, TQC_CURVE_FIELDS),
         }
-        return TQCPolicy(model, spec.task), trained
+        return TQCPolicy(model, spec.task), trained, None
 
     from gcdt.checkpoint import load_checkpoint
     from gcdt.policies.trained import TrainedPolicy
@@ -141,7 +157,8 @@ def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict
     data = artifacts.dataset(spec.data)
     timings["data_seconds"] = round(time.perf_counter() - began, 3)
     began = time.perf_counter()
-    ckpt = load_checkpoint(artifacts.checkpoint(spec))
+    path, trained_steps = artifacts.trained_checkpoint(spec)
+    ckpt = load_checkpoint(path)
     timings["train_seconds"] = round(time.perf_counter() - began, 3)
     history = ckpt["history"]
     trained = {
@@ -151,7 +168,8 @@ def _trained_policy(spec: RunSpec, timings: dict[str, float]) -> tuple[Any, dict
         "model_config": ckpt["model_config"],
         "loss_curve": [{k: row[k] for k in ("step", "loss", "lr")} for row in history],
     }
-    return TrainedPolicy(ckpt, spec.task, target_return=spec.target_return), trained
+    policy = TrainedPolicy(ckpt, spec.task, target_return=spec.target_return)
+    return policy, trained, trained_steps
 
 
 def _evaluate(policy: Any, spec: RunSpec, seed: int) -> dict[str, Any]:

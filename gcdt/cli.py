@@ -766,6 +766,13 @@ class Sweep(_Command, _Progress):
             )
         todo = [p for p in planned if p.state != "done"]
         workers = self.workers or default_workers(profile)
+        # How the estimates were scaled comes before the totals built from them.
+        if costs.cpu:
+            cpu, factor, n = costs.cpu
+            print(
+                f"this CPU ({cpu}) takes {factor:.2f}x as long per gradient step as the other"
+                f" machines of the finished runs (median of {n} rates): their rates are scaled"
+            )
         shared = shared_cost(todo, costs)
         for section, (runs, waiting, seconds) in section_costs(todo).items():
             also = f" ({waiting} of them waiting)" if waiting else ""
@@ -773,12 +780,6 @@ class Sweep(_Command, _Progress):
                 f"section {section}: {runs} runs to run{also}, about {seconds / 3600:.1f} h of work"
             )
         print(f"datasets and TQC+HER experts to make: about {shared / 3600:.1f} h of work")
-        if costs.cpu:
-            cpu, factor, n = costs.cpu
-            print(
-                f"this CPU ({cpu}) takes {factor:.2f}x as long per gradient step as the other"
-                f" machines of the finished runs (median of {n} rates): their rates are scaled"
-            )
         if waiting := [p for p in todo if p.state == "waiting"]:
             agents = sorted({p.problem for p in waiting})
             print(f"{len(waiting)} of them wait for published agents: {'; '.join(agents)}")

@@ -557,6 +557,10 @@ def test_dry_run_lists_runs_with_state_and_cost(capsys):
     assert sum("gcdt push/sparse seed 2" in line for line in lines) == len(p.rq4_sizes)
     # Each section's cost, then the data's (done runs cost nothing: the published ones are).
     assert lines[-2].startswith("datasets and TQC+HER experts to make: about ")
+    # A note on rates scaled from other CPUs, where there is one, precedes the totals.
+    scaled = [i for i, line in enumerate(lines) if line.startswith("this CPU (")]
+    totals = [i for i, line in enumerate(lines) if line.startswith(("section ", "datasets "))]
+    assert len(scaled) <= 1 and all(i < min(totals) for i in scaled)
     costs = CostModel()
     short, long = (
         dataclasses.replace(build_grid(TINY, only="table1")[0].spec, train_steps=n)

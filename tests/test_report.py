@@ -251,9 +251,10 @@ def test_budget_check_sets_the_longer_run_against_the_budget_runs_interval(
     for entry in build_grid(profile):
         ratio = entry.spec.data.expert_ratio
         # On expert data the longer run scores `longer`; on the mixture it changes nothing.
-        success = 0.5 if ratio == 1.0 else 0.3
-        if entry.sections == ("budget",) and ratio == 1.0:
-            success = longer
+        # The budget runs' seeds differ by 2 points each.
+        success = (0.5 if ratio == 1.0 else 0.3) + 0.02 * entry.spec.seed
+        if entry.sections == ("budget",):
+            success = longer if ratio == 1.0 else 0.3
         _write_result(store, entry.spec, {"success_rate": success, "mean_return": -9.0,
                                           "episodes": 200})  # fmt: skip
     table = budget.budget_table(tables.load_runs(profile, tmp_path))
@@ -267,9 +268,13 @@ def test_budget_check_sets_the_longer_run_against_the_budget_runs_interval(
     assert row.within is within and row.change == pytest.approx(100 * longer - 50)
     # The mixture's check stands beside RQ5's run of the same mixture, not Table 1's.
     assert (mixed.expert_ratio, mixed.success, mixed.change, mixed.within) == (0.5, 30.0, 0, True)
+    # The cell's three seeds at the budget span 50-54 % (30-34 % on the mixture).
+    assert (row.seeds, row.seeds_low, row.seeds_high) == pytest.approx((3, 50.0, 54.0))
+    assert row.within_seeds is within and mixed.within_seeds is True
     text = budget.budget_markdown(table)
     assert ("| 100 | 10 | 50.0 " in text) and ("| 50 | 10 | 30.0 " in text)
-    assert text.count("| **no** |") == (0 if within else 1)
+    assert "| 50.0-54.0 (3 seeds) |" in text and "| 30.0-34.0 (3 seeds) |" in text
+    assert text.count("| **no** |") == (0 if within else 2)
 
 
 def test_fidelity_sets_each_gcdt_cell_against_the_papers_targets_beside_its_data(tmp_path):

@@ -5,6 +5,10 @@ A profile that trains for a fixed number of gradient steps instead of the paper'
 trained `Profile.budget_factor` times longer, beside the grid's run of the same task, reward,
 seed and data (Table 1's at 100 % expert data, RQ5's at a mixture's share). The budget holds
 when the longer run's success lies within the 95 % interval of the budget run's evaluation.
+
+That interval is the evaluation's noise only. One longer seed cannot tell a change of budget
+from a change of training seed, so the check also gives the range of the cell's seeds at the
+budget: a change inside it is as large as the seeds already differ by.
 """
 
 from __future__ import annotations
@@ -19,24 +23,27 @@ _CELLS = {"table1", "rq4", "rq5"}
 
 def budget_table(runs: pd.DataFrame) -> pd.DataFrame:
     """Per task, reward, seed and expert share of the check: the budget run's and the longer
-    run's steps and success with its 95 % interval, the change, and whether the longer run's
-    success lies within the budget run's interval (empty without a budget section)."""
+    run's steps and success with its 95 % interval, the change, whether the longer run's
+    success lies within the budget run's interval, and the cell's seeds at the budget (their
+    number and success range) with whether it lies within that (empty without a budget
+    section)."""
     longer = runs[runs["sections"].apply(lambda s: "budget" in s)]
     cells = runs["sections"].apply(lambda s: bool(_CELLS & set(s)))
     rows = []
     for r in longer.itertuples():
-        base = runs[
+        cell = runs[
             cells
             & (runs["method"] == r.method)
             & (runs["task"] == r.task)
             & (runs["reward"] == r.reward)
-            & (runs["seed"] == r.seed)
             & (runs["size"] == r.size)
             & (runs["expert_ratio"] == r.expert_ratio)
         ]
+        base = cell[cell["seed"] == r.seed]
         if base.empty:
             continue  # the budget run is not done yet
         b, x = aggregate(base, ["task"]).iloc[0], aggregate(longer.loc[[r.Index]], ["task"]).iloc[0]
+        seeds = 100 * cell["success_rate"]
         rows.append(
             {
                 "task": r.task,
@@ -53,6 +60,10 @@ def budget_table(runs: pd.DataFrame) -> pd.DataFrame:
                 "longer_ci_high": x["success_ci_high"],
                 "change": x["success_mean"] - b["success_mean"],
                 "within": bool(b["success_ci_low"] <= x["success_mean"] <= b["success_ci_high"]),
+                "seeds": len(cell),
+                "seeds_low": seeds.min(),
+                "seeds_high": seeds.max(),
+                "within_seeds": bool(seeds.min() <= x["success_mean"] <= seeds.max()),
             }
         )
     return pd.DataFrame(rows)
@@ -62,8 +73,9 @@ def budget_markdown(table: pd.DataFrame) -> str:
     """`budget_table` as Markdown: one row per check."""
     lines = [
         "| task | reward | seed | expert % | steps | success % [95 %] | longer: steps "
-        "| success % [95 %] | change (pts) | within the budget run's interval |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| success % [95 %] | change (pts) | within the budget run's interval "
+        "| the cell's seeds at the budget: success % range | within that range |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in table.itertuples():
         lines.append(
@@ -71,6 +83,8 @@ def budget_markdown(table: pd.DataFrame) -> str:
             f"{r.steps:,} | {r.success:.1f} "
             f"[{r.success_ci_low:.1f}, {r.success_ci_high:.1f}] | {r.longer_steps:,} | "
             f"{r.longer_success:.1f} [{r.longer_ci_low:.1f}, {r.longer_ci_high:.1f}] | "
-            f"{r.change:+.1f} | {'yes' if r.within else '**no**'} |"
+            f"{r.change:+.1f} | {'yes' if r.within else '**no**'} | "
+            f"{r.seeds_low:.1f}-{r.seeds_high:.1f} ({r.seeds} seeds) | "
+            f"{'yes' if r.within_seeds else '**no**'} |"
         )
     return "\n".join(lines)

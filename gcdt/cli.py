@@ -635,10 +635,13 @@ class TQCPublish(_Command):
     name = "tqc publish"
     run_dir: Path = _tqc_run_dir("a finished gcdt tqc train run")
     out: Path | None = setting(
-        None, "the agent's folder (default: results/experts/tqc_TASK_REWARD)", metavar="DIR"
+        None,
+        "the agent's folder (default: results/experts/tqc_TASK_REWARD, with _seedS after it "
+        "for a seed other than 0)",
+        metavar="DIR",
     )
     replace: bool = setting(
-        False, "replace the agent of the same task and reward already published in --out"
+        False, "replace the agent of the same task, reward and seed already published in --out"
     )
     config: PublishConfig
 

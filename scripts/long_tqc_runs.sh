@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# Issue 42's long TQC+HER runs (1M env steps, cpu config, sbx loop, seed 0), one after the
-# other, each started or resumed from its checkpoint and published when it finishes: re-run
-# this script after any stop.
-# Usage: nohup scripts/long_tqc_runs.sh [task:reward ...] >> artifacts/long_tqc_runs.log 2>&1 &
+# Issue 42's long TQC+HER runs (1M env steps, cpu config, sbx loop), one after the other,
+# each started or resumed from its checkpoint and published when it finishes: re-run this
+# script after any stop. A run is task:reward (seed 0, the task's expert) or task:reward:seed
+# (a further seed of Table 1's TQC+HER cell, published beside it as tqc_TASK_REWARD_seedS).
+# Usage: nohup scripts/long_tqc_runs.sh [task:reward[:seed] ...] \
+#          >> artifacts/long_tqc_runs.log 2>&1 &
 #        scripts/long_tqc_runs.sh --snapshot   (before a session ends: commit what it writes)
 # With no arguments it walks every run; two instances given disjoint lists use both cores
 # (two instances must never share a run: they would write the same checkpoint).
@@ -11,7 +13,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT="${GCDT_ARTIFACTS:-artifacts}/long_tqc"
-SEED=0
 STEPS="${GCDT_LONG_TQC_STEPS:-1000000}"   # a smaller value: a rehearsal of the whole script
 if [ "${1:-}" = "--snapshot" ]; then
   for out in "$ROOT"/*/; do
@@ -25,19 +26,21 @@ runs=("$@")
 [ ${#runs[@]} -gt 0 ] ||
   runs=(push:sparse pick_and_place:sparse reach:sparse pick_and_place:dense push:dense reach:dense)
 for run in "${runs[@]}"; do
-  task="${run%%:*}" reward="${run##*:}" out="$ROOT/${task}_${reward}"
-  agent="results/experts/tqc_${task}_${reward}/run.json"                # finished and published
+  IFS=: read -r task reward seed <<< "$run"
+  seed="${seed:-0}" name="${task}_${reward}"
+  [ "$seed" = 0 ] || name="${name}_seed${seed}"
+  out="$ROOT/$name" agent="results/experts/tqc_$name/run.json"         # finished and published
   [ -f "$agent" ] && .venv/bin/python -c 'import json, sys
 sys.exit(json.load(open(sys.argv[1]))["env_steps"] < int(sys.argv[2]))' "$agent" "$STEPS" && continue
   if [ ! -f "$out/run.json" ]; then                                   # not finished here
-    snapshot="results/experts/in_progress/tqc_${task}_${reward}_seed${SEED}"
+    snapshot="results/experts/in_progress/tqc_${task}_${reward}_seed${seed}"
     if [ ! -f "$out/checkpoint.tqc" ] && [ -f "$snapshot/checkpoint.tqc" ]; then
       mkdir -p "$out" && cp "$snapshot"/* "$out"/
     fi
     resume=()
     [ -f "$out/checkpoint.tqc" ] && resume=(--resume)
     .venv/bin/gcdt tqc train --task "$task" --reward "$reward" --config cpu --steps "$STEPS" \
-      --seed "$SEED" --eval-every 25000 --eval-episodes 100 --out "$out" --no-progress "${resume[@]}"
+      --seed "$seed" --eval-every 25000 --eval-episodes 100 --out "$out" --no-progress "${resume[@]}"
   fi
   # Publish it at once (replacing an agent of fewer steps, and the run's snapshot): the large
   # profile's runs that wait for it can start; commit results/experts/ afterwards.

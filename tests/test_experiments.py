@@ -885,7 +885,7 @@ def test_large_profile_keeps_the_papers_data_and_evaluation():
         dataclasses.replace(large, table1_tqc=Scope())
 
 
-def _publish_fake_agent(folder: Path, steps: int, success: float) -> None:
+def _publish_fake_agent(folder: Path, steps: int, success: float, seed: int = 0) -> None:
     """A published agent's files as `gcdt.baselines.publish` writes them (the zip's bytes are
     only hashed here)."""
     folder.mkdir(parents=True)
@@ -893,7 +893,7 @@ def _publish_fake_agent(folder: Path, steps: int, success: float) -> None:
     held_out = {"seed": 5000, "success_rate": success, "mean_return": -5.0, "std_return": 2.0,
                 "episodes": 500, "timesteps": 9000}  # fmt: skip
     curve = [{"env_steps": float(steps), "success_rate": success, "mean_return": -5.0}]
-    record = {"task": "reach", "reward": "sparse", "seed": 0, "env_steps": steps,
+    record = {"task": "reach", "reward": "sparse", "seed": seed, "env_steps": steps,
               "curve": curve, "published": {"held_out": held_out}}  # fmt: skip
     (folder / "run.json").write_text(json.dumps(record))
 
@@ -939,3 +939,16 @@ def test_runs_wait_for_their_published_agent(tmp_path, monkeypatch):
     assert (cell["method"], cell["success_mean"], cell["seeds"]) == ("tqc", 90.0, 1)
     assert cell["success_ci_low"] < 90.0 < cell["success_ci_high"]  # 500 held-out episodes
     assert (cell["paper_success"], cell["paper_return"]) == (100.0, -1.82)
+    # A further seed, published beside seed 0's agent, joins the cell.
+    _publish_fake_agent(agent.parent / f"{agent.name}_seed1", steps=120, success=0.7, seed=1)
+    rows = agent_rows(profile, tmp_path / "experts")
+    assert [r["seed"] for r in rows] == [0, 1]
+    cell = table1(pd.DataFrame(rows)).iloc[0]
+    assert (cell["seeds"], cell["success_mean"]) == (2, pytest.approx(80.0))
+    # A folder holding another cell's agent is refused, not counted in the wrong cell.
+    other = agent.parent / f"{agent.name}_seed2"
+    _publish_fake_agent(other, steps=120, success=0.7, seed=2)
+    record = json.loads((other / "run.json").read_text())
+    (other / "run.json").write_text(json.dumps({**record, "task": "push"}))
+    with pytest.raises(GcdtError, match=r"tqc_reach_sparse_seed2 holds a push/sparse agent, not"):
+        agent_rows(profile, tmp_path / "experts")

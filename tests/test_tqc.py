@@ -696,15 +696,16 @@ def _fake_finished_run(folder, task="push", reward="sparse"):
     """A folder with a finished run's files (the models are not zips: every refusal below
     comes before anything is measured)."""
     folder.mkdir(parents=True)
-    (folder / "run.json").write_text(json.dumps({"task": task, "reward": reward}))
+    (folder / "run.json").write_text(json.dumps({"task": task, "reward": reward, "seed": 0}))
     for name in ("eval.csv", "model.zip", "best_model.zip"):
         (folder / name).write_text("x")
     return folder
 
 
-def _fake_agent(folder, task="push", reward="sparse"):
+def _fake_agent(folder, task="push", reward="sparse", seed=0):
     folder.mkdir(parents=True)
-    (folder / "run.json").write_text(json.dumps({"task": task, "reward": reward, "old": True}))
+    record = {"task": task, "reward": reward, "seed": seed, "old": True}
+    (folder / "run.json").write_text(json.dumps(record))
     (folder / "model.zip").write_text("the old agent")
     return _unchanged(folder)
 
@@ -715,7 +716,8 @@ def _fake_agent(folder, task="push", reward="sparse"):
         ("missing", "no run folder at"),
         ("unfinished", "unfinished TQC+HER run: finish it with --resume"),
         ("taken", "already holds a published agent: pass --replace to replace it"),
-        ("other task", "holds a reach/sparse agent, not push/sparse"),
+        ("other task", "holds a reach/sparse agent of seed 0, not push/sparse of seed 0"),
+        ("other seed", "holds a push/sparse agent of seed 1, not push/sparse of seed 0"),
         ("not an agent", "is not a published agent's folder"),
     ],
 )
@@ -727,15 +729,16 @@ def test_tqc_publish_refuses_bad_input_in_one_line(assert_usage_error, tmp_path,
     if case == "unfinished":  # killed before its end: a checkpoint, no run.json
         (run / "run.json").unlink()
         (run / "checkpoint.tqc").write_text("x")
-    if case in ("taken", "other task"):
-        before = _fake_agent(out, task="reach" if case == "other task" else "push")
+    if case in ("taken", "other task", "other seed"):
+        task, seed = ("reach" if case == "other task" else "push"), int(case == "other seed")
+        before = _fake_agent(out, task=task, seed=seed)
     if case == "not an agent":
         out.mkdir(parents=True)
         (out / "notes.txt").write_text("mine")
         before = _unchanged(out)
-    replace = ["--replace"] if case in ("other task", "not an agent") else []
+    replace = ["--replace"] if case in ("other task", "other seed", "not an agent") else []
     assert_usage_error([*argv, *replace], message)
-    if case in ("taken", "other task", "not an agent"):
+    if case in ("taken", "other task", "other seed", "not an agent"):
         assert _unchanged(out) == before  # nothing overwritten
         assert [p.name for p in out.parent.iterdir()] == [out.name]  # nothing staged
     else:

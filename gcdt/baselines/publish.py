@@ -93,9 +93,10 @@ def read_agent(folder: str | Path) -> dict[str, Any] | None:
     return record
 
 
-def agent_dir(task: str, reward: str, root: str | Path = AGENTS_DIR) -> Path:
-    """Where the agent of `task` with `reward` is published."""
-    return Path(root) / f"tqc_{task}_{reward}"
+def agent_dir(task: str, reward: str, root: str | Path = AGENTS_DIR, seed: int = 0) -> Path:
+    """Where the agent of `task` with `reward` and `seed` is published: seed 0's folder is the
+    task's expert (`tqc_TASK_REWARD`), further seeds sit beside it (`..._seedS`)."""
+    return Path(root) / (f"tqc_{task}_{reward}" + (f"_seed{seed}" if seed else ""))
 
 
 def _finished_run(run: Path) -> dict[str, Any]:
@@ -127,9 +128,9 @@ def _measure(zip_path: Path, task: str, reward: str, episodes: int, seed: int) -
     return {"seed": seed, **{k: summary[k] for k in keep}}
 
 
-def _check_out(out: Path, task: str, reward: str, replace: bool) -> None:
+def _check_out(out: Path, task: str, reward: str, seed: int, replace: bool) -> None:
     """Refuse an existing `out` unless `replace` is asked and it holds an agent of the same
-    task and reward (anything else there is not a published agent's to swap)."""
+    task, reward and seed (anything else there is not a published agent's to swap)."""
     check_writable(out.parent, folder=True)  # the new agent is built beside `out`
     if not out.exists() and not out.is_symlink():
         return
@@ -142,10 +143,11 @@ def _check_out(out: Path, task: str, reward: str, replace: bool) -> None:
             "(git history keeps the old one)"
         )
     old = json.loads(record.read_text())
-    if (old.get("task"), old.get("reward")) != (task, reward):
+    if (old.get("task"), old.get("reward"), old.get("seed")) != (task, reward, seed):
         raise GcdtError(
-            f"{out} holds a {old.get('task')}/{old.get('reward')} agent, not {task}/{reward}: "
-            "choose the --out of this task and reward"
+            f"{out} holds a {old.get('task')}/{old.get('reward')} agent of seed "
+            f"{old.get('seed')}, not {task}/{reward} of seed {seed}: choose the --out of this "
+            "task, reward and seed"
         )
 
 
@@ -155,15 +157,15 @@ def publish_agent(
     config: PublishConfig = PublishConfig(),
     replace: bool = False,
 ) -> Path:
-    """Publish the finished run in `run` (default folder: `agent_dir(task, reward)`); returns
-    the folder. An agent already there is refused unless `replace` (of the same task and
-    reward); it is then swapped for the new one whole. The run's snapshot beside the agents
+    """Publish the finished run in `run` (default folder: `agent_dir(task, reward, seed)`);
+    returns the folder. An agent already there is refused unless `replace` (of the same task,
+    reward and seed); it is then swapped for the new one whole. The run's snapshot beside the agents
     (`snapshot_dir` under out's folder), if one is kept, is removed: the run is finished."""
     run = Path(run)
     record = _finished_run(run)
-    task, reward = record["task"], record["reward"]
-    out = Path(out) if out is not None else agent_dir(task, reward)
-    _check_out(out, task, reward, replace)  # before minutes of measuring, not after
+    task, reward, seed = record["task"], record["reward"], record.get("seed", 0)
+    out = Path(out) if out is not None else agent_dir(task, reward, seed=seed)
+    _check_out(out, task, reward, seed, replace)  # before minutes of measuring, not after
     validation = {
         name: _measure(run / zip_name, task, reward, config.validation_episodes, VALIDATION_SEED)
         for name, zip_name in CANDIDATES.items()
@@ -190,7 +192,7 @@ def publish_agent(
         shutil.copyfile(run / EVAL_CSV, staging / EVAL_CSV)
         write_json_atomic(staging / RUN_JSON, {**record, "curve": curve, "published": published})
     snapshots = out.parent / SNAPSHOTS_DIR.name
-    shutil.rmtree(snapshot_dir(task, reward, record["seed"], snapshots), ignore_errors=True)
+    shutil.rmtree(snapshot_dir(task, reward, seed, snapshots), ignore_errors=True)
     with suppress(OSError):
         snapshots.rmdir()  # the last run in progress is finished: no empty folder is left
     return out

@@ -105,42 +105,51 @@ def load_runs(
 
 def agent_rows(profile: Profile, agents_dir: str | Path = AGENTS_DIR) -> list[dict]:
     """Table 1's TQC+HER cells of a profile with `tqc_agents`: each published agent of its
-    Table 1 tasks and rewards, of the profile's `agent_steps`, as a run row whose metrics are
-    the agent's held-out evaluation (`gcdt.baselines.publish`). Agents not published yet, or of
-    another number of steps, are left out: the table shows their cells empty."""
+    Table 1 tasks and rewards, every seed, of the profile's `agent_steps`, as a run row whose
+    metrics are the agent's held-out evaluation (`gcdt.baselines.publish`). Agents not
+    published yet, or of another number of steps, are left out: a cell is empty, or the mean
+    over the seeds that are there."""
     rows = []
     for task in profile.table1.tasks:
         for reward in profile.table1.rewards:
-            folder = agent_dir(task, reward, agents_dir)
-            record = read_agent(folder) or {}
-            steps = profile.agent_steps
-            if "published" not in record or (steps is not None and record["env_steps"] != steps):
-                continue
-            held_out = record["published"]["held_out"]
-            rows.append(
-                {
-                    "key": f"{AGENT_KEY}{folder.name}",
-                    "sections": ("table1",),
-                    "method": "tqc",
-                    "task": task,
-                    "reward": reward,
-                    "seed": record["seed"],
-                    "train_steps": None,
-                    "size": None,
-                    "expert_ratio": None,
-                    "target_return": paper.TARGET_RETURN,
-                    "eval_region": None,
-                    "train_region": None,
-                    "success_rate": held_out["success_rate"],
-                    "mean_return": held_out["mean_return"],
-                    "episodes": held_out["episodes"],
-                    "std_return": held_out["std_return"],
-                    "evaluations": [held_out],
-                    "training": {"curve": record["curve"], "env_steps": record["env_steps"]},
-                    "execution": {"agent": folder.name},
-                }
-            )
+            first = agent_dir(task, reward, agents_dir)  # seed 0's; further seeds beside it
+            for folder in [first, *sorted(first.parent.glob(f"{first.name}_seed*"))]:
+                record = read_agent(folder) or {}
+                if record and (record["task"], record["reward"]) != (task, reward):
+                    raise GcdtError(
+                        f"{folder} holds a {record['task']}/{record['reward']} agent, not "
+                        f"{task}/{reward}: publish it again into its own folder"
+                    )
+                steps = profile.agent_steps
+                if "published" in record and steps in (None, record["env_steps"]):
+                    rows.append(_agent_row(folder, record))
     return rows
+
+
+def _agent_row(folder: Path, record: dict) -> dict:
+    """A published agent's held-out evaluation as a run row of its Table 1 TQC+HER cell."""
+    held_out = record["published"]["held_out"]
+    return {
+        "key": f"{AGENT_KEY}{folder.name}",
+        "sections": ("table1",),
+        "method": "tqc",
+        "task": record["task"],
+        "reward": record["reward"],
+        "seed": record["seed"],
+        "train_steps": None,
+        "size": None,
+        "expert_ratio": None,
+        "target_return": paper.TARGET_RETURN,
+        "eval_region": None,
+        "train_region": None,
+        "success_rate": held_out["success_rate"],
+        "mean_return": held_out["mean_return"],
+        "episodes": held_out["episodes"],
+        "std_return": held_out["std_return"],
+        "evaluations": [held_out],
+        "training": {"curve": record["curve"], "env_steps": record["env_steps"]},
+        "execution": {"agent": folder.name},
+    }
 
 
 def load_agent_curves(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:

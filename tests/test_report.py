@@ -381,6 +381,12 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
     assert "3 of its run files are the `smoke` profile's, byte for byte" in (
         report.readme_block(PROFILE)
     )
+    # A finished grid that no `make reproduce` timed gives what its runs cost in all.
+    (tmp_path / "results" / PROFILE.name / "reproduce.json").unlink()
+    total = (7200 + 60 * (len(grid) - 2)) / 3600
+    assert f"{done[:-1]}; its runs' own times add up to {total:.1f} h (one core" in (
+        report.readme_block(PROFILE)
+    )
     # A grid still running says so, and what its finished runs cost so far.
     for entry in grid[-2:]:  # two of the 60 s runs
         (tmp_path / "results" / PROFILE.name / "runs" / f"{entry.spec.key()}.json").unlink()

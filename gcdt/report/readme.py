@@ -103,16 +103,27 @@ def wall_time_text(profile: Profile) -> str:
 
 def grid_status_text(profile: Profile, runs) -> str:
     """How far `profile`'s grid is, `runs` being its `load_runs`: its finished and planned
-    runs, the published agents beside them, and for a grid still running what its finished
-    runs cost so far (their own times: a measurement, where the dry run is an estimate)."""
+    runs, the published agents beside them, and what the runs cost (their own times: a
+    measurement, where the dry run is an estimate): so far, for a grid still running; in all,
+    with the agents' training, for a finished one that no `make reproduce` timed."""
     done, planned = tables.progress(runs, profile)
     agents = len(runs) - done
     text = f"{done} of {planned} runs finished" + (
         f", and {agents} published agents" if agents else ""
     )
+    is_agent = runs["key"].str.startswith(tables.AGENT_KEY)
+    spent = sum(
+        e.get("seconds", {}).get("total_seconds", 0.0) for e in runs[~is_agent]["execution"]
+    )
+    if done >= planned and not (results_dir(profile.name) / "reproduce.json").exists():
+        text += (
+            f"; its runs' own times add up to {spent / 3600:.1f} h (one core each, shared "
+            "datasets included, work lost to a stop not counted)"
+        )
+        core_hours = [e.get("core_hours") for e in runs[is_agent]["execution"]]
+        if core_hours and None not in core_hours:
+            text += f", and training its published agents {sum(core_hours):.1f} core-hours"
     if done < planned:
-        grid = runs[~runs["key"].str.startswith(tables.AGENT_KEY)]
-        spent = sum(e.get("seconds", {}).get("total_seconds", 0.0) for e in grid["execution"])
         text += (
             f"; the grid is still running (its finished runs took {spent / 3600:.1f} h of their"
             " own time, shared datasets included), and a cell is the mean of the seeds done so"

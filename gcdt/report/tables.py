@@ -148,7 +148,7 @@ def _agent_row(folder: Path, record: dict) -> dict:
         "std_return": held_out["std_return"],
         "evaluations": [held_out],
         "training": {"curve": record["curve"], "env_steps": record["env_steps"]},
-        "execution": {"agent": folder.name},
+        "execution": {"agent": folder.name, "core_hours": record.get("core_hours")},
     }
 
 

@@ -338,8 +338,8 @@ LARGE = dataclasses.replace(
     expert_noise=0.2,
     agent_steps=paper.DATASET_SIZE,
     # Table 1's TQC+HER cells are those agents' (and the dense ones') held-out evaluations:
-    # one seed each (a 1M-step run is the longest job of the bundle: its run.json records its
-    # core-hours), with the `cpu` config they trained with.
+    # seed 0 in each cell, further seeds as they finish (a 1M-step run is the longest job of
+    # the bundle: its run.json records its core-hours), with the `cpu` config they trained with.
     tqc_agents=True,
     tqc_config="cpu",
     table1_tqc=Scope(tasks=()),
@@ -460,7 +460,8 @@ def deviations(profile: Profile) -> list[str]:
         out.append(
             "Table 1's TQC+HER cells from the published agents of "
             + (f"{p.agent_steps:,} online steps" if p.agent_steps else "any budget")
-            + f" (one seed each, results/experts/) instead of runs of the grid with "
+            + " (each seed published in results/experts/: seed 0 in every cell, further "
+            f"seeds where their runs have finished) instead of runs of the grid with "
             f"{len(ref.seeds)} seeds"
         )
     if p.budget.tasks:

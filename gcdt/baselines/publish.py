@@ -99,6 +99,13 @@ def agent_dir(task: str, reward: str, root: str | Path = AGENTS_DIR, seed: int =
     return Path(root) / (f"tqc_{task}_{reward}" + (f"_seed{seed}" if seed else ""))
 
 
+def agent_dirs(task: str, reward: str, root: str | Path = AGENTS_DIR) -> list[Path]:
+    """The folders `agent_dir` gives the cell of `task` and `reward`: seed 0's first, then
+    those of the further seeds published beside it."""
+    first = agent_dir(task, reward, root)
+    return [first, *sorted(first.parent.glob(f"{first.name}_seed*"))]
+
+
 def _finished_run(run: Path) -> dict[str, Any]:
     """The run's record, refusing a folder that is not a finished `gcdt tqc train` run."""
     if not run.is_dir():
@@ -159,8 +166,9 @@ def publish_agent(
 ) -> Path:
     """Publish the finished run in `run` (default folder: `agent_dir(task, reward, seed)`);
     returns the folder. An agent already there is refused unless `replace` (of the same task,
-    reward and seed); it is then swapped for the new one whole. The run's snapshot beside the agents
-    (`snapshot_dir` under out's folder), if one is kept, is removed: the run is finished."""
+    reward and seed); it is then swapped for the new one whole. The run's snapshot beside the
+    agents (`snapshot_dir` under out's folder), if one is kept, is removed: the run is
+    finished."""
     run = Path(run)
     record = _finished_run(run)
     task, reward, seed = record["task"], record["reward"], record.get("seed", 0)

@@ -16,7 +16,7 @@ import pandas as pd
 from scipy import stats
 
 from gcdt import paper
-from gcdt.baselines.publish import AGENTS_DIR, agent_dir, read_agent
+from gcdt.baselines.publish import AGENTS_DIR, agent_dirs, read_agent
 from gcdt.baselines.tqc_her import EVAL_CSV, RUN_JSON
 from gcdt.errors import GcdtError
 from gcdt.experiments.grid import build_grid
@@ -109,18 +109,16 @@ def agent_rows(profile: Profile, agents_dir: str | Path = AGENTS_DIR) -> list[di
     metrics are the agent's held-out evaluation (`gcdt.baselines.publish`). Agents not
     published yet, or of another number of steps, are left out: a cell is empty, or the mean
     over the seeds that are there."""
-    rows = []
+    rows, steps = [], profile.agent_steps
     for task in profile.table1.tasks:
         for reward in profile.table1.rewards:
-            first = agent_dir(task, reward, agents_dir)  # seed 0's; further seeds beside it
-            for folder in [first, *sorted(first.parent.glob(f"{first.name}_seed*"))]:
+            for folder in agent_dirs(task, reward, agents_dir):
                 record = read_agent(folder) or {}
                 if record and (record["task"], record["reward"]) != (task, reward):
                     raise GcdtError(
                         f"{folder} holds a {record['task']}/{record['reward']} agent, not "
                         f"{task}/{reward}: publish it again into its own folder"
                     )
-                steps = profile.agent_steps
                 if "published" in record and steps in (None, record["env_steps"]):
                     rows.append(_agent_row(folder, record))
     return rows

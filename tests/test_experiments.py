@@ -854,17 +854,34 @@ def test_large_profile_keeps_the_papers_data_and_evaluation():
     # The sweep's order is the priority: Table 1, the budget check, then RQ5 from 25 %.
     first = [e.sections[0] for e in grid]
     assert first == sorted(first, key=large.section_order.index)
-    budget = [e.spec for e in grid if e.sections == ("budget",)]
-    # On expert data and at RQ5's disputed 25 %, each beside the grid's run of that data.
-    assert [(s.task, s.seed, s.train_steps, s.data.expert_ratio) for s in budget] == [
-        ("push", 0, 40_000, 1.0),
-        ("push", 0, 40_000, 0.25),
-        ("pick_and_place", 0, 40_000, 1.0),
+    # Table 1 trains Push and PickAndPlace 4 times longer than the figures' points, BC by the
+    # same samples rule (K = 20 times the DT's steps); Reach keeps the grid's budget.
+    assert "(reach 2,000, push 10,000, pick_and_place 10,000; Table 1: push 40,000, " in text
+    steps = {
+        (e.spec.method, e.spec.task, e.sections[0]): e.spec.train_steps
+        for e in grid
+        if e.sections[0] in ("table1", "rq5")
+    }
+    assert steps[("gcdt", "push", "table1")] == steps[("gcdt", "pick_and_place", "table1")]
+    assert steps[("gcdt", "push", "table1")] == 40_000 and steps[("bc", "push", "table1")] == (
+        800_000
+    )
+    assert (steps[("gcdt", "reach", "table1")], steps[("gcdt", "push", "rq5")]) == (2_000, 10_000)
+    budget = [e.spec for e in grid if "budget" in e.sections]
+    # Each budget the grid trains with, 4 times longer: Table 1's on expert data, and the
+    # figures' on expert data and at RQ5's disputed 25 %, each beside the grid's run of that
+    # data at that budget (the figures' longer run on expert data is Table 1's own run).
+    assert sorted((s.task, s.seed, s.train_steps, s.data.expert_ratio) for s in budget) == [
         ("pick_and_place", 0, 40_000, 0.25),
+        ("pick_and_place", 0, 40_000, 1.0),
+        ("pick_and_place", 0, 160_000, 1.0),
+        ("push", 0, 40_000, 0.25),
+        ("push", 0, 40_000, 1.0),
+        ("push", 0, 160_000, 1.0),
     ]
-    cells = {e.spec.key(): e.spec for e in grid if "budget" not in e.sections}
+    cells = {e.spec.key(): e.spec for e in grid if set(e.sections) - {"budget"}}
     for spec in budget:
-        base = dataclasses.replace(spec, train_steps=10_000)
+        base = dataclasses.replace(spec, train_steps=spec.train_steps // 4)
         assert base.key() in cells, f"no grid run of the budget check's data: {spec.label}"
     rq5 = [e.spec.data.expert_ratio for e in grid if e.sections == ("rq5",)]
     assert rq5[:2] == [0.25, 0.25] and set(rq5) == {0.0, 0.25, 0.5, 0.75}
@@ -883,6 +900,8 @@ def test_large_profile_keeps_the_papers_data_and_evaluation():
         dataclasses.replace(large, table1=Scope(tasks=("reach",)))
     with pytest.raises(GcdtError, match=r"from the published agents \(tqc_agents\) or from grid"):
         dataclasses.replace(large, table1_tqc=Scope())
+    with pytest.raises(GcdtError, match=r"table1_train_steps needs fixed train_steps and a "):
+        dataclasses.replace(large, table1_train_steps={"push": 40_000})
 
 
 def _publish_fake_agent(folder: Path, steps: int, success: float, seed: int = 0) -> None:

@@ -257,7 +257,7 @@ def test_budget_check_sets_the_longer_run_against_the_budget_runs_interval(
             success = longer if ratio == 1.0 else 0.3
         _write_result(store, entry.spec, {"success_rate": success, "mean_return": -9.0,
                                           "episodes": 200})  # fmt: skip
-    table = budget.budget_table(tables.load_runs(profile, tmp_path))
+    table = budget.budget_table(tables.load_runs(profile, tmp_path), profile.budget_factor)
     row, mixed = table.sort_values("expert_ratio", ascending=False).itertuples()
     assert (row.task, row.seed, row.expert_ratio, row.steps, row.longer_steps) == (
         "push", 0, 1.0, 10, 40,
@@ -275,6 +275,41 @@ def test_budget_check_sets_the_longer_run_against_the_budget_runs_interval(
     assert ("| 100 | 10 | 50.0 " in text) and ("| 50 | 10 | 30.0 " in text)
     assert "| 50.0-54.0 (3 seeds) |" in text and "| 30.0-34.0 (3 seeds) |" in text
     assert text.count("| **no** |") == (0 if within else 2)
+
+
+def test_budget_check_sets_each_budget_of_the_grid_against_its_own_runs(tmp_path):
+    from gcdt.report import budget
+
+    # Table 1 trains twice as long as the figures' points: each budget gets its longer run,
+    # set against the runs of that budget only (not the other budget's runs of the same data).
+    push = Scope(tasks=("push",), rewards=("sparse",))
+    profile = dataclasses.replace(
+        PROFILE, table1=push, table1_tqc=Scope(tasks=()), rq4=Scope(tasks=()), rq5=push,
+        ablation=Scope(tasks=()), generalisation=Scope(tasks=()), budget=push, budget_factor=4,
+        budget_ratios=(1.0,), table1_train_steps={**PROFILE.train_steps, "push": 20},
+    )  # fmt: skip
+    store = RunStore(tmp_path)
+    steps = {}
+    for entry in build_grid(profile):
+        spec = entry.spec
+        if spec.data.expert_ratio != 1.0 or spec.method != "gcdt":
+            continue
+        steps.setdefault(spec.seed, []).append(spec.train_steps)
+        # Success grows with the budget: 10 steps 40 %, 20 steps 60 %, 40 and 80 steps 70 %.
+        success = {10: 0.4, 20: 0.6, 40: 0.7, 80: 0.7}[spec.train_steps] + 0.01 * spec.seed
+        _write_result(store, spec, {"success_rate": success, "mean_return": -9.0,
+                                    "episodes": 200})  # fmt: skip
+    assert sorted(steps[0]) == [10, 20, 40, 80] and sorted(steps[1]) == [10, 20]
+    table = budget.budget_table(tables.load_runs(profile, tmp_path), profile.budget_factor)
+    rows = {r.steps: r for r in table.itertuples()}
+    assert sorted(rows) == [10, 20] and set(table["expert_ratio"]) == {1.0}
+    # The figures' budget: 40 % at 10 steps against 70 % at 40 (Table 1's own run of seed 0).
+    assert (rows[10].longer_steps, rows[10].success, rows[10].longer_success) == (40, 40.0, 70.0)
+    assert (rows[10].seeds_low, rows[10].seeds_high) == pytest.approx((40.0, 42.0))
+    assert rows[10].within is False
+    # Table 1's budget: 60 % at 20 steps against 70 % at 80, beside Table 1's seeds only.
+    assert (rows[20].longer_steps, rows[20].success, rows[20].longer_success) == (80, 60.0, 70.0)
+    assert (rows[20].seeds, rows[20].seeds_low, rows[20].seeds_high) == pytest.approx((3, 60, 62))
 
 
 def test_fidelity_sets_each_gcdt_cell_against_the_papers_targets_beside_its_data(tmp_path):

@@ -351,10 +351,11 @@ def _digest(path: str, mtime_ns: int, size: int) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
-def bc_steps(profile: Profile, task: str, data: DataSpec) -> int | None:
-    """BC's gradient steps under the profile's BC budget rule (see `BC_BUDGETS`)."""
+def bc_steps(profile: Profile, dt_steps: int | None, data: DataSpec) -> int | None:
+    """BC's gradient steps beside a DT's `dt_steps` (None: the paper's epochs) under the
+    profile's BC budget rule (see `BC_BUDGETS`)."""
     if profile.bc_budget == "steps":
-        return None if profile.train_steps is None else profile.train_steps[task]
+        return dt_steps
     from gcdt.training import TrainConfig  # torch: not for `gcdt --help`
 
     # The context K and the batch of offline training: the paper's, which the grid keeps.
@@ -362,8 +363,8 @@ def bc_steps(profile: Profile, task: str, data: DataSpec) -> int | None:
     # "samples": a DT step learns from `batch` windows of K state-action pairs, a BC step from
     # `batch` pairs, so BC takes K times the DT's steps; under the paper's epoch budget that
     # is the same number of epochs over transitions as the DT's over episodes.
-    if profile.train_steps is not None:
-        return profile.train_steps[task] * context
+    if dt_steps is not None:
+        return dt_steps * context
     return paper.EPOCHS * math.ceil(data.size / batch)
 
 
@@ -378,9 +379,11 @@ def run_spec(
     eval_seeds: tuple[int, ...] | None = None,
     eval_region: str | None = None,
     budget_factor: int = 1,
+    table1: bool = False,
 ) -> RunSpec:
     """A run of `profile`, evaluated on its training seed's evaluation seeds unless
-    `eval_seeds` says otherwise, trained for `budget_factor` times the profile's budget."""
+    `eval_seeds` says otherwise, trained for `budget_factor` times the profile's budget
+    (Table 1's with `table1`)."""
     tqc = None
     if method == "tqc":
         steps = profile.tqc_steps if profile.tqc_steps is not None else profile.dataset_size
@@ -395,10 +398,10 @@ def run_spec(
             eval_episodes=profile.tqc_eval_episodes,
         )
     train_steps = None  # TQC+HER: online; the DTs: the profile's steps, or the paper's epochs
+    if method != "tqc":
+        train_steps = profile.offline_steps(task, table1)
     if method == "bc":
-        train_steps = bc_steps(profile, task, data)
-    elif method != "tqc" and profile.train_steps is not None:
-        train_steps = profile.train_steps[task]
+        train_steps = bc_steps(profile, train_steps, data)
     if train_steps is not None:
         train_steps *= budget_factor
     learning_rate = None if method == "tqc" else profile.learning_rate
@@ -448,14 +451,15 @@ def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
                             ):
                                 continue
                             data = None if method == "tqc" else full
-                            add(section, run_spec(p, method, task, reward, seed, data))
+                            spec = run_spec(p, method, task, reward, seed, data, table1=True)
+                            add(section, spec)
                     elif section == "budget":
                         if seed == p.seeds[0]:  # one seed: the check, not a cell
-                            for ratio in p.budget_ratios:
+                            for ratio, base in p.budget_bases():
                                 data = data_spec(p, task, p.dataset_size, ratio)
                                 spec = run_spec(
                                     p, "gcdt", task, reward, seed, data,
-                                    budget_factor=p.budget_factor,
+                                    budget_factor=p.budget_factor, table1=base == "table1",
                                 )  # fmt: skip
                                 add(section, spec)
                     elif section == "ablation":

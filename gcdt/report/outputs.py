@@ -46,7 +46,7 @@ def write_tables(profile: Profile, runs) -> list[Path]:
     if not cells.empty:  # GC-DT against the paper's Table 1, beside its data
         files["fidelity.csv"] = _csv(cells)
         files["fidelity.md"] = fidelity.fidelity_markdown(cells) + "\n"
-    checks = budget.budget_table(runs)
+    checks = budget.budget_table(runs, profile.budget_factor)
     if not checks.empty:  # the fixed offline budget against a longer one
         files["budget_check.csv"] = _csv(checks)
         files["budget_check.md"] = budget.budget_markdown(checks) + "\n"

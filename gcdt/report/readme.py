@@ -225,12 +225,12 @@ def readme_block(profile: Profile) -> str:
     cells = fidelity.fidelity_table(runs)
     if not cells.empty:
         parts += [f"**{fidelity.CAPTION}**:", fidelity.fidelity_markdown(cells)]
-    checks = budget.budget_table(runs)
+    checks = budget.budget_table(runs, profile.budget_factor)
     if not checks.empty:
         parts += [
-            f"**Budget check**: GC-DT trained {profile.budget_factor} times longer than the "
-            "profile's fixed budget, beside the grid's run of the same data (success on the "
-            "same evaluation):",
+            f"**Budget check**: GC-DT trained {profile.budget_factor} times longer than a "
+            "fixed budget of the profile, beside the grid's run of the same data at that "
+            "budget (success on the same evaluation):",
             budget.budget_markdown(checks),
         ]
     ablation = tables.ablation_table(runs)

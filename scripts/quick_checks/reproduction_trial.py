@@ -62,12 +62,17 @@ def main() -> None:
     published = get_profile(args.profile)
     if published.train_steps is None:
         sys.exit(f"error: profile {args.profile!r} trains for epochs, not steps: nothing to scale")
-    steps = {t: max(1, round(s * args.budget_scale)) for t, s in published.train_steps.items()}
+
+    def scaled(budget: dict[str, int] | None) -> dict[str, int] | None:
+        return budget and {t: max(1, round(s * args.budget_scale)) for t, s in budget.items()}
+
     trial = dataclasses.replace(
         published,
         table1=Scope(tasks=tuple(args.tasks), rewards=tuple(args.rewards)),
-        train_steps=steps,
+        train_steps=scaled(published.train_steps),
+        table1_train_steps=scaled(published.table1_train_steps),
     )
+    steps = {t: trial.offline_steps(t, table1=True) for t in trial.train_steps}  # Table 1's
     outputs = Path(args.outputs).resolve()
     os.environ["GCDT_OUTPUTS"] = str(outputs)
     runs_dir = results_dir(trial.name, outputs) / "runs"

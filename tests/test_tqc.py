@@ -696,7 +696,8 @@ def _fake_finished_run(folder, task="push", reward="sparse"):
     """A folder with a finished run's files (the models are not zips: every refusal below
     comes before anything is measured)."""
     folder.mkdir(parents=True)
-    (folder / "run.json").write_text(json.dumps({"task": task, "reward": reward, "seed": 0}))
+    record = {"task": task, "reward": reward, "seed": 0, "env_steps": 1000}
+    (folder / "run.json").write_text(json.dumps(record))
     for name in ("eval.csv", "model.zip", "best_model.zip"):
         (folder / name).write_text("x")
     return folder
@@ -715,6 +716,7 @@ def _fake_agent(folder, task="push", reward="sparse", seed=0):
     [
         ("missing", "no run folder at"),
         ("unfinished", "unfinished TQC+HER run: finish it with --resume"),
+        ("no seed", "lacks seed: not a gcdt tqc train run's record"),
         ("taken", "already holds a published agent: pass --replace to replace it"),
         ("other task", "holds a reach/sparse agent of seed 0, not push/sparse of seed 0"),
         ("other seed", "holds a push/sparse agent of seed 1, not push/sparse of seed 0"),
@@ -729,6 +731,9 @@ def test_tqc_publish_refuses_bad_input_in_one_line(assert_usage_error, tmp_path,
     if case == "unfinished":  # killed before its end: a checkpoint, no run.json
         (run / "run.json").unlink()
         (run / "checkpoint.tqc").write_text("x")
+    if case == "no seed":  # published as seed 0's expert, were a missing seed taken as 0
+        record = json.loads((run / "run.json").read_text())
+        (run / "run.json").write_text(json.dumps({k: v for k, v in record.items() if k != "seed"}))
     if case in ("taken", "other task", "other seed"):
         task, seed = ("reach" if case == "other task" else "push"), int(case == "other seed")
         before = _fake_agent(out, task=task, seed=seed)

@@ -122,7 +122,16 @@ def _finished_run(run: Path) -> dict[str, Any]:
                 f"{run / name} is {mib:.1f} MiB, over the {MAX_ZIP_MIB:g} MiB a published "
                 "agent may take: train it with a smaller net_arch"
             )
-    return json.loads((run / RUN_JSON).read_text())
+    try:
+        record = json.loads((run / RUN_JSON).read_text())
+        missing = [k for k in AGENT_FIELDS if k not in record]
+    except (OSError, ValueError, TypeError) as err:
+        raise GcdtError(f"{run / RUN_JSON} is not a readable run record ({err})") from err
+    if missing:  # e.g. a seed: never assumed, since it names the folder the agent goes to
+        raise GcdtError(
+            f"{run / RUN_JSON} lacks {', '.join(missing)}: not a gcdt tqc train run's record"
+        )
+    return record
 
 
 def _measure(zip_path: Path, task: str, reward: str, episodes: int, seed: int) -> dict:
@@ -171,7 +180,7 @@ def publish_agent(
     finished."""
     run = Path(run)
     record = _finished_run(run)
-    task, reward, seed = record["task"], record["reward"], record.get("seed", 0)
+    task, reward, seed = record["task"], record["reward"], record["seed"]
     out = Path(out) if out is not None else agent_dir(task, reward, seed=seed)
     _check_out(out, task, reward, seed, replace)  # before minutes of measuring, not after
     validation = {

@@ -867,6 +867,9 @@ def test_large_profile_keeps_the_papers_data_and_evaluation():
         800_000
     )
     assert (steps[("gcdt", "reach", "table1")], steps[("gcdt", "push", "rq5")]) == (2_000, 10_000)
+    # The DT ablations are set against Table 1's GC-DT: they train for its budget.
+    ablation = dataclasses.replace(large, ablation=Scope(tasks=("push",), rewards=("sparse",)))
+    assert {e.spec.train_steps for e in build_grid(ablation, only="ablation")} == {40_000}
     budget = [e.spec for e in grid if "budget" in e.sections]
     # Each budget the grid trains with, 4 times longer: Table 1's on expert data, and the
     # figures' on expert data and at RQ5's disputed 25 %, each beside the grid's run of that

@@ -463,8 +463,10 @@ def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
                                 )  # fmt: skip
                                 add(section, spec)
                     elif section == "ablation":
+                        # Set against Table 1's GC-DT: trained for Table 1's budget.
                         for method in ABLATION_METHODS:
-                            add(section, run_spec(p, method, task, reward, seed, full))
+                            spec = run_spec(p, method, task, reward, seed, full, table1=True)
+                            add(section, spec)
                     elif section == "targets":
                         # Validation and test evaluations in one run: the study picks a target
                         # on the first and scores it on the second.

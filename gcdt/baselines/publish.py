@@ -83,13 +83,20 @@ def read_agent(folder: str | Path) -> dict[str, Any] | None:
     path = Path(folder) / RUN_JSON
     if not path.is_file():
         return None
+    return _read_record(path, "agent record", "publish it again (gcdt tqc publish)")
+
+
+def _read_record(path: Path, what: str, fix: str) -> dict[str, Any]:
+    """The run.json at `path`, refused in one line (naming `what` it should be, and the `fix`)
+    where it cannot be read or lacks `AGENT_FIELDS`: a missing seed is never assumed, since it
+    names the folder an agent is published to."""
     try:
         record = json.loads(path.read_text())
         missing = [k for k in AGENT_FIELDS if k not in record]
     except (OSError, ValueError, TypeError) as err:
-        raise GcdtError(f"{path} is not a readable agent record ({err}): publish it again") from err
+        raise GcdtError(f"{path} is not a readable {what} ({err}): {fix}") from err
     if missing:
-        raise GcdtError(f"{path} lacks {', '.join(missing)}: publish it again (gcdt tqc publish)")
+        raise GcdtError(f"{path} lacks {', '.join(missing)}: {fix}")
     return record
 
 
@@ -122,16 +129,7 @@ def _finished_run(run: Path) -> dict[str, Any]:
                 f"{run / name} is {mib:.1f} MiB, over the {MAX_ZIP_MIB:g} MiB a published "
                 "agent may take: train it with a smaller net_arch"
             )
-    try:
-        record = json.loads((run / RUN_JSON).read_text())
-        missing = [k for k in AGENT_FIELDS if k not in record]
-    except (OSError, ValueError, TypeError) as err:
-        raise GcdtError(f"{run / RUN_JSON} is not a readable run record ({err})") from err
-    if missing:  # e.g. a seed: never assumed, since it names the folder the agent goes to
-        raise GcdtError(
-            f"{run / RUN_JSON} lacks {', '.join(missing)}: not a gcdt tqc train run's record"
-        )
-    return record
+    return _read_record(run / RUN_JSON, "run record", "not a gcdt tqc train run's record")
 
 
 def _measure(zip_path: Path, task: str, reward: str, episodes: int, seed: int) -> dict:

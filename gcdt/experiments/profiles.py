@@ -249,11 +249,17 @@ class Profile:
         steps = self.table1_train_steps if table1 and self.table1_train_steps else self.train_steps
         return steps[task]
 
+    def table1_own_steps(self) -> dict[str, int]:
+        """The tasks whose Table 1 trains for another budget than the rest of the grid, with
+        that budget (empty: one budget for the whole grid)."""
+        table1, rest = self.table1_train_steps or {}, self.train_steps or {}
+        return {t: n for t, n in table1.items() if n != rest.get(t)}
+
     def budget_bases(self) -> list[tuple[float, str]]:
         """The budget check's budget runs, as (expert share, section of the grid): Table 1's
         at 100 % expert data, RQ5's at a mixture, and RQ5's at 100 % too when Table 1 trains
         for another budget than the rest of the grid."""
-        own = self.table1_train_steps not in (None, self.train_steps)
+        own = bool(self.table1_own_steps())
         bases = []
         for ratio in self.budget_ratios:
             if ratio == 1.0:
@@ -462,9 +468,8 @@ def deviations(profile: Profile) -> list[str]:
             out.append(f"{label} {listed[0]} instead of {listed[1]}")
     if p.train_steps != ref.train_steps:
         steps = ", ".join(f"{t} {n:,}" for t, n in (p.train_steps or {}).items())
-        if p.table1_train_steps not in (None, p.train_steps):
-            longer = {t: n for t, n in p.table1_train_steps.items() if n != p.train_steps[t]}
-            steps += "; Table 1: " + ", ".join(f"{t} {n:,}" for t, n in longer.items())
+        if own := p.table1_own_steps():
+            steps += "; Table 1: " + ", ".join(f"{t} {n:,}" for t, n in own.items())
         out.append(
             f"offline training for a fixed number of gradient steps ({steps}) instead of "
             f"{paper.EPOCHS} epochs"

@@ -870,6 +870,13 @@ def test_large_profile_keeps_the_papers_data_and_evaluation():
     # The DT ablations are set against Table 1's GC-DT: they train for its budget.
     ablation = dataclasses.replace(large, ablation=Scope(tasks=("push",), rewards=("sparse",)))
     assert {e.spec.train_steps for e in build_grid(ablation, only="ablation")} == {40_000}
+    # So does the return-target study: each target re-evaluates Table 1's checkpoint.
+    targets = dataclasses.replace(large, targets=Scope(tasks=("push",), rewards=("sparse",)))
+    target_runs = [e.spec for e in build_grid(targets, only="targets")]
+    assert {s.train_steps for s in target_runs} == {40_000}
+    label = "gcdt push/sparse seed 0 (1,000,000 expert)"
+    (table1_run,) = [e.spec for e in grid if e.sections[0] == "table1" and e.spec.label == label]
+    assert {s.training_key() for s in target_runs if s.seed == 0} == {table1_run.training_key()}
     budget = [e.spec for e in grid if "budget" in e.sections]
     # Each budget the grid trains with, 4 times longer: Table 1's on expert data, and the
     # figures' on expert data and at RQ5's disputed 25 %, each beside the grid's run of that
@@ -899,6 +906,12 @@ def test_large_profile_keeps_the_papers_data_and_evaluation():
         dataclasses.replace(large, budget_ratios=(1.0, 0.6))
     with pytest.raises(GcdtError, match=r"no rq5 run of its data for reach/sparse"):
         dataclasses.replace(large, budget=Scope(tasks=("reach", "push"), rewards=("sparse",)))
+    # A task whose Table 1 keeps the grid's budget has one base run on expert data, not two.
+    both = Scope(tasks=("reach", "push"), rewards=("sparse",))
+    reach = dataclasses.replace(large, budget=both, rq5=both)
+    checks = [e for e in build_grid(reach, only="budget") if e.spec.task == "reach"]
+    assert sorted(e.spec.data.expert_ratio for e in checks) == [0.25, 1.0]
+    assert {e.sections for e in checks} == {("budget",)}
     with pytest.raises(GcdtError, match=r"no table1 run of its data for push/sparse"):
         dataclasses.replace(large, table1=Scope(tasks=("reach",)))
     with pytest.raises(GcdtError, match=r"from the published agents \(tqc_agents\) or from grid"):

@@ -528,6 +528,31 @@ def test_online_offline_figure_sets_agents_curves_beside_offline_runs(runs, tmp_
     assert tables.load_agent_curves(tmp_path / "none").empty
 
 
+def test_online_offline_figure_keeps_each_training_budget_apart(tmp_path):
+    # Table 1 trains Push 4x longer than RQ4: its 1M dot must not average both budgets' seeds.
+    steps = dict(SMOKE.train_steps)
+    profile = dataclasses.replace(PROFILE, table1_train_steps={**steps, "push": 4 * steps["push"]})
+    store = RunStore(tmp_path / "runs")
+    for entry in build_grid(profile):
+        spec = entry.spec
+        rate = _success(spec) + (0.05 if spec.train_steps == 4 * steps["push"] else 0.0)
+        _write_result(store, spec, {"success_rate": rate, "mean_return": -1.0, "episodes": 20})
+    runs = tables.load_runs(profile, store.root)
+    empty = tables.load_agent_curves(tmp_path / "none")
+    push = figures.online_offline_figure(runs, empty).axes[1]
+    labels = [c.get_label() for c in push.containers]
+    short, long_ = (f"GC-DT, offline on expert data, {n:,} steps" for n in (10, 40))
+    assert short in labels and long_ in labels
+    (table1,) = [c.lines[0] for c in push.containers if c.get_label() == long_]
+    np.testing.assert_array_equal(table1.get_xdata(), [profile.dataset_size])
+    np.testing.assert_allclose(table1.get_ydata(), [100 * (0.5 + 0.2 + 0.1 + 0.05)])
+    (rq4,) = [c.lines[0] for c in push.containers if c.get_label() == short]
+    sizes = np.array(sorted({*profile.rq4_sizes, profile.dataset_size}))
+    np.testing.assert_array_equal(rq4.get_xdata(), sizes)
+    expected = 100 * (0.5 * sizes / profile.dataset_size + 0.2 + 0.1)
+    np.testing.assert_allclose(np.asarray(rq4.get_ydata(), dtype=float), expected)
+
+
 def _agent(root, task, reward, env_steps, curve, held_out=None, n_envs=8):
     """A published agent's folder as `gcdt tqc publish` writes it (`held_out`: its held-out
     success and return; None: published before held-out measurements, without a record)."""

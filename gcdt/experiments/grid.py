@@ -399,7 +399,7 @@ def run_spec(
         )
     train_steps = None  # TQC+HER: online; the DTs: the profile's steps, or the paper's epochs
     if method != "tqc":
-        train_steps = profile.offline_steps(task, table1)
+        train_steps = profile.dt_steps(task, table1)
     if method == "bc":
         train_steps = bc_steps(profile, train_steps, data)
     if train_steps is not None:
@@ -455,7 +455,7 @@ def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
                             add(section, spec)
                     elif section == "budget":
                         if seed == p.seeds[0]:  # one seed: the check, not a cell
-                            for ratio, base in p.budget_bases():
+                            for ratio, base in p.budget_bases(task):
                                 data = data_spec(p, task, p.dataset_size, ratio)
                                 spec = run_spec(
                                     p, "gcdt", task, reward, seed, data,
@@ -469,10 +469,13 @@ def build_grid(profile: Profile, only: str | None = None) -> list[GridEntry]:
                             add(section, spec)
                     elif section == "targets":
                         # Validation and test evaluations in one run: the study picks a target
-                        # on the first and scores it on the second.
+                        # on the first and scores it on the second. Trained for Table 1's
+                        # budget: each target re-evaluates Table 1's GC-DT checkpoint.
                         split = target_seeds(seed)
                         for target in p.return_targets[reward]:
-                            spec = run_spec(p, "gcdt", task, reward, seed, full, target, split)
+                            spec = run_spec(
+                                p, "gcdt", task, reward, seed, full, target, split, table1=True
+                            )
                             add(section, spec)
                     elif section == "generalisation":
                         # Trained on one region's goals, evaluated inside it and outside it.

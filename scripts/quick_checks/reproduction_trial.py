@@ -72,7 +72,7 @@ def main() -> None:
         train_steps=scaled(published.train_steps),
         table1_train_steps=scaled(published.table1_train_steps),
     )
-    steps = {t: trial.offline_steps(t, table1=True) for t in trial.train_steps}  # Table 1's
+    steps = {t: trial.dt_steps(t, table1=True) for t in trial.train_steps}  # Table 1's
     outputs = Path(args.outputs).resolve()
     os.environ["GCDT_OUTPUTS"] = str(outputs)
     runs_dir = results_dir(trial.name, outputs) / "runs"

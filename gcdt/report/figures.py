@@ -283,7 +283,8 @@ def online_offline_figure(
             sel = task_runs[task_runs["method"] == method]
             # One series per training budget: a profile may give Table 1 a longer budget than
             # RQ4, and a dot that averaged seeds of two budgets would belong to neither.
-            for (steps, budget), marker in zip(sel.groupby("train_steps"), "osD^v", strict=False):
+            for i, (steps, budget) in enumerate(sel.groupby("train_steps")):
+                marker = "osD^v"[i % 5]  # cycled, so that no budget's series is ever dropped
                 stats = aggregate(budget, ["size"]).sort_values("size")
                 m = stats["success_mean"].to_numpy()
                 ax.errorbar(

@@ -35,6 +35,7 @@ from gcdt.experiments import (
     sweep,
 )
 from gcdt.experiments.grid import RUN_SCHEMA, data_spec
+from gcdt.experiments.runner import LOSS_CURVE_POINTS, thin_curve
 from gcdt.experiments.profiles import SMOKE, Scope, target_seeds
 from gcdt.paths import REPO_ROOT
 from gcdt.provenance import cpu_signature
@@ -178,6 +179,23 @@ def test_each_published_run_file_is_a_run_its_grid_names(name, finished):
     for key, result in published.items():
         assert result["key"] == key and result["schema"] == RUN_SCHEMA
         assert result["spec"] == json.loads(json.dumps(grid[key].to_dict()))
+        # a long run's file keeps a thinned loss curve (scripts/thin_loss_curves.py thins older ones)
+        assert len(result.get("training", {}).get("loss_curve") or []) <= LOSS_CURVE_POINTS
+
+
+def test_a_long_loss_curve_is_thinned_to_log_spaced_rows_keeping_its_ends():
+    rows = [{"step": 50 * (i + 1), "loss": 1.0 / (i + 1), "lr": 1e-4} for i in range(16_000)]
+    thinned = thin_curve(rows)
+    gaps = np.diff([r["step"] for r in thinned]) // 50
+    assert 1_000 < len(thinned) <= LOSS_CURVE_POINTS
+    assert thinned[0] == rows[0] and thinned[-1] == rows[-1]  # the final loss is kept
+    assert thinned[:150] == rows[:150]  # every early row, where the loss changes fastest
+    assert gaps.min() >= 1 and gaps[-1] > 50  # increasing steps, sparse only late
+    assert all(r in rows for r in thinned)  # logged values, never averaged or invented
+    assert thin_curve(rows[:LOSS_CURVE_POINTS]) == rows[:LOSS_CURVE_POINTS]  # short: kept whole
+    assert thin_curve(rows[:5], most=2) == [rows[0], rows[4]]
+    with pytest.raises(ValueError, match="at least 2 points"):
+        thin_curve(rows, most=1)
 
 
 def _keys(profile) -> tuple[list[RunSpec], list[str], list[str]]:

@@ -37,6 +37,23 @@ from gcdt.regions import GoalRegion
 #: What a TQC+HER learning-curve point keeps (its timings depend on the machine, not the run).
 TQC_CURVE_FIELDS = ("env_steps", "success_rate", "mean_return", "episodes")
 
+#: The most loss-curve points a run file keeps. Training logs a row every `log_every` steps,
+#: so an 800,000-step BC run logs 16,000; thinned, its file stays small. Every shorter run
+#: keeps its whole log.
+LOSS_CURVE_POINTS = 2000
+
+
+def thin_curve(rows: list[dict[str, Any]], most: int = LOSS_CURVE_POINTS) -> list[dict[str, Any]]:
+    """At most `most` of `rows`, at log-spaced positions: every early row and ever fewer later
+    ones, since the loss changes fastest early and the loss figure's step axis is logarithmic.
+    The first and the last row (the run's final loss) are always kept; no value is changed."""
+    if most < 2:
+        raise ValueError(f"a curve needs at least 2 points, got most={most}")
+    if len(rows) <= most:
+        return list(rows)
+    picks = np.unique(np.geomspace(1, len(rows), most).round().astype(int)) - 1
+    return [rows[i] for i in picks]
+
 
 def execute_run(
     spec_dict: dict[str, Any], store_root: str, artifacts_root: str, backend: str
@@ -166,7 +183,7 @@ def _trained_policy(
         "final_loss": history[-1]["loss"] if history else None,
         "dataset": {k: v for k, v in data.summary().items() if k != "task"},
         "model_config": ckpt["model_config"],
-        "loss_curve": [{k: row[k] for k in ("step", "loss", "lr")} for row in history],
+        "loss_curve": [{k: row[k] for k in ("step", "loss", "lr")} for row in thin_curve(history)],
     }
     policy = TrainedPolicy(ckpt, spec.task, target_return=spec.target_return)
     return policy, trained, trained_steps

@@ -185,12 +185,19 @@ def architecture_figure(model_config: dict, task: str) -> plt.Figure:
 
 
 def learning_curves_figure(
-    curves: dict[str, pd.DataFrame], x: str, y: str, xlabel: str, ylabel: str, title: str
+    curves: dict[str, pd.DataFrame],
+    x: str,
+    y: str,
+    xlabel: str,
+    ylabel: str,
+    title: str,
+    logx: bool = False,
 ) -> plt.Figure:
     """One line per labelled curve (TQC+HER success against env steps, DT loss, ...).
 
     Points are marked when a curve has few of them (a one-point curve is otherwise
     invisible), and colours come from a 20-colour cycle so that a dozen curves stay apart.
+    `logx` puts curves of very different lengths on one readable axis.
     """
     fig, ax = plt.subplots(figsize=(7, 4))
     colours = plt.get_cmap("tab20").colors
@@ -205,6 +212,8 @@ def learning_curves_figure(
         )
     if y == "success_rate":
         ax.set_ylim(-5, 105)  # the whole scale: a flat curve at 0 % reads as 0 %, not as noise
+    if logx:
+        ax.set_xscale("log")
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
@@ -306,7 +315,9 @@ def online_offline_figure(
 
 
 def training_loss_figure(runs: pd.DataFrame) -> plt.Figure | None:
-    """The offline training loss of Table 1's GC-DT and BC runs, from the stored curves."""
+    """The offline training loss of Table 1's GC-DT and BC runs, from the stored curves, on a
+    log step axis: BC takes many more (smaller) steps for the same samples
+    (`gcdt.experiments.grid.bc_steps`)."""
     table1 = runs[runs["sections"].apply(lambda s: "table1" in s)]
     curves = {
         f"{r.method} {r.task}/{r.reward} seed {r.seed}": pd.DataFrame(r.training["loss_curve"])
@@ -316,7 +327,7 @@ def training_loss_figure(runs: pd.DataFrame) -> plt.Figure | None:
     if not curves:
         return None
     return learning_curves_figure(
-        curves, "step", "loss", "gradient step", "action MSE", "Offline training loss"
+        curves, "step", "loss", "gradient step", "action MSE", "Offline training loss", logx=True
     )
 
 

@@ -13,7 +13,6 @@ changes nothing. `--check` lists the files it would rewrite and exits 1 if there
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 from gcdt.experiments.runner import LOSS_CURVE_POINTS, thin_curve
@@ -32,8 +31,8 @@ def main() -> int:
     for profile in args.profile or PROFILES:
         store = RunStore(results_dir(profile) / "runs")
         for path in sorted(store.root.glob("*.json")):
-            result = json.loads(path.read_text())
-            curve = result.get("training", {}).get("loss_curve") or []
+            result = store.read(path.stem).result  # None for a corrupt or foreign file: left alone
+            curve = (result or {}).get("training", {}).get("loss_curve") or []
             if len(curve) <= LOSS_CURVE_POINTS:
                 continue
             stale.append(path)

@@ -35,8 +35,8 @@ from gcdt.experiments import (
     sweep,
 )
 from gcdt.experiments.grid import RUN_SCHEMA, data_spec
-from gcdt.experiments.runner import LOSS_CURVE_POINTS, thin_curve
 from gcdt.experiments.profiles import SMOKE, Scope, target_seeds
+from gcdt.experiments.runner import LOSS_CURVE_POINTS, thin_curve
 from gcdt.paths import REPO_ROOT
 from gcdt.provenance import cpu_signature
 from gcdt.regions import GoalRegion
@@ -179,7 +179,7 @@ def test_each_published_run_file_is_a_run_its_grid_names(name, finished):
     for key, result in published.items():
         assert result["key"] == key and result["schema"] == RUN_SCHEMA
         assert result["spec"] == json.loads(json.dumps(grid[key].to_dict()))
-        # a long run's file keeps a thinned loss curve (scripts/thin_loss_curves.py thins older ones)
+        # a long run's loss curve is stored thinned (scripts/thin_loss_curves.py: older files)
         assert len(result.get("training", {}).get("loss_curve") or []) <= LOSS_CURVE_POINTS
 
 

@@ -763,9 +763,10 @@ class Sweep(_Command, _Progress):
         for warning in warnings:
             print(f"warning: {warning}", file=sys.stderr)
         for p in planned:
+            resumes = f" (checkpoint here at step {p.done_steps:,})" if p.done_steps else ""
             print(
                 f"{p.key}  {p.state:<8} {p.estimate_seconds / 60:8.1f} min  "
-                f"{p.entry.spec.label}  [{', '.join(p.entry.sections)}]"
+                f"{p.entry.spec.label}  [{', '.join(p.entry.sections)}]{resumes}"
             )
         todo = [p for p in planned if p.state != "done"]
         workers = self.workers or default_workers(profile)

@@ -585,6 +585,34 @@ def test_dry_run_lists_runs_with_state_and_cost(capsys):
     )
 
 
+def test_a_checkpoint_left_here_counts_in_the_estimate(tmp_path, monkeypatch):
+    """A killed run resumes from its checkpoint, so the dry run estimates only the steps
+    left; a finished checkpoint (the return-target study's) leaves its evaluation alone."""
+    from gcdt.experiments.artifacts import checkpoint_dir
+    from gcdt.experiments.costs import CostModel
+    from gcdt.experiments.sweep import plan
+
+    monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))
+    costs, store = CostModel(), RunStore(tmp_path / "runs")
+    spec = next(e.spec for e in build_grid(TINY, only="table1") if e.spec.method == "gcdt")
+    full, steps = costs.estimate(spec), spec.train_steps
+
+    def estimate(logged_steps: tuple[int, ...]) -> tuple[float, int]:
+        rows = ["step,loss,lr,seconds", *(f"{s},0.5,0.001,{s}" for s in logged_steps)]
+        (out / "train_log.csv").write_text("\n".join(rows) + "\n")
+        (p,) = [p for p in plan(TINY, store, costs=costs)[0] if p.entry.spec == spec]
+        return p.estimate_seconds, p.done_steps
+
+    out = checkpoint_dir(spec)
+    out.mkdir(parents=True)
+    assert estimate((1, 2)) == (full, 0)  # a log without its checkpoint resumes nothing
+    (out / "checkpoint.pt").write_bytes(b"stand-in")
+    seconds, done = estimate((1, 2))
+    # The 2 steps done are not paid again; the evaluation still is.
+    assert done == 2 and full - seconds == pytest.approx(2 * costs.rate("dt_step", spec.task))
+    assert estimate((1, 2, steps)) == (pytest.approx(costs.estimate(spec, train=False)), steps)
+
+
 def test_a_sweep_of_one_task_runs_its_runs_longest_first(capsys, monkeypatch, tmp_path):
     """`--task` keeps one task's runs (an unknown task is refused); the sweep hands them to the
     backend longest first, so that no worker is left alone with a long run at the end."""

@@ -449,6 +449,19 @@ def test_reproduction_record_and_readme_block(tmp_path, monkeypatch):
         f"| {row.section} | {row.finished} | {row.planned} | about {row.hours_left:.1f} h of work |"
     )
     assert "**The grid's sections**" in written and line in written and line in block
+    # The published estimate is the same on every machine: a checkpoint left here by a
+    # killed run shortens the dry run's, not the report's.
+    import gcdt.experiments.artifacts as artifacts
+
+    monkeypatch.setattr(artifacts, "checkpointed_steps", lambda spec: 10**9)
+    assert tables.sections_left(PROFILE).equals(left)
+    from gcdt.experiments.sweep import plan
+
+    planned, _ = plan(PROFILE, RunStore(tmp_path / "results" / PROFILE.name / "runs"))
+    resumed = [p for p in planned if p.state != "done" and p.entry.spec.method != "tqc"]
+    # Runs sharing a checkpoint (one training, two evaluations) count it once.
+    trained = {p.entry.spec.training_key() for p in resumed}
+    assert resumed and trained == {p.entry.spec.training_key() for p in resumed if p.done_steps}
 
 
 def test_report_cli_rejects_a_negative_wall_time(capsys):

@@ -190,6 +190,24 @@ def checkpoint(spec: RunSpec) -> Path:
     return trained_checkpoint(spec)[0]
 
 
+def checkpointed_steps(spec: RunSpec) -> int:
+    """Gradient steps the checkpoint of offline run `spec` on this machine holds (0: none):
+    where a killed run resumes, all of them once it is finished. Read from the loss log
+    written beside each checkpoint, so that a dry run need not load the model."""
+    from gcdt.checkpoint import CHECKPOINT_NAME
+    from gcdt.training import LOG_NAME
+
+    out = checkpoint_dir(spec)
+    if not (out / CHECKPOINT_NAME).exists() or not (out / LOG_NAME).exists():
+        return 0
+    with open(out / LOG_NAME, newline="") as f:
+        rows = list(csv.DictReader(f))
+    try:
+        return int(rows[-1]["step"]) if rows else 0
+    except (KeyError, ValueError):  # not a loss log: estimate the whole training
+        return 0
+
+
 def trained_checkpoint(spec: RunSpec) -> tuple[Path, int]:
     """`checkpoint(spec)`, and the gradient steps this call trained to finish it: 0 where it
     was finished before (here or on another node), fewer than the run's where it resumed.

@@ -54,14 +54,17 @@ class CostModel:
     cpu: tuple[str, float, int] | None = None
 
     @classmethod
-    def measured(cls, profile: str | None = None, on: str = "cpu") -> CostModel:
+    def measured(
+        cls, profile: str | None = None, on: str = "cpu", this_machine: bool = True
+    ) -> CostModel:
         """Defaults, overridden by benchmark JSON, overridden by finished runs' timings; with
         `profile`, a rate its own finished runs measure is theirs alone (its data, budgets and
         machine), the other profiles' runs filling in the rest. Offline gradient steps are
         also measured per task and data shape (`rate`), and per CPU: runs on this machine's
         kind of CPU set its rates, and scale those measured elsewhere (`_this_cpu`).
         `on="cuda"`: the GPU benchmarks' rates instead (`_gpu`), the CPU's where they
-        measure nothing."""
+        measure nothing. Without `this_machine`, no CPU is this one: the same rates on every
+        machine (what a published report quotes)."""
         model = cls()
         bench = REPO_ROOT / "results" / "bench"
         if on == "cuda":
@@ -88,7 +91,7 @@ class CostModel:
         samples: dict[tuple[bool, bool], dict[str, list[float]]] = {
             (here, own): {} for here in (False, True) for own in (False, True)
         }
-        this_cpu = cpu_signature()
+        this_cpu = cpu_signature() if this_machine else None
         # The published runs and, in a reproduction, its own (the same file is read once).
         roots = dict.fromkeys(root.resolve() for root in (REPO_ROOT, outputs_root()))
         for path in (p for root in roots for p in (root / "results").glob("*/runs/*.json")):
@@ -164,9 +167,10 @@ class CostModel:
     def _set(self, name: str, value: float, source: str) -> None:
         self.rates[name], self.source[name] = value, source
 
-    def estimate(self, spec: RunSpec, train: bool = True) -> float:
+    def estimate(self, spec: RunSpec, train: bool = True, done_steps: int = 0) -> float:
         """Seconds for `spec` alone (shared datasets and TQC experts are counted apart);
-        without `train`, its evaluation only (another run makes its checkpoint)."""
+        without `train`, its evaluation only (another run makes its checkpoint); an offline
+        run whose checkpoint holds `done_steps` gradient steps trains only the rest."""
         r = self.rates
         seconds = r["run_overhead"]
         eval_rate = r["dt_eval_step" if spec.method in DT_METHODS else "eval_step"]
@@ -176,9 +180,10 @@ class CostModel:
             return seconds + (spec.tqc.steps or 0) * rate
         if not train:
             return seconds
+        steps = max(0, offline_steps(spec) - done_steps)
         if spec.method == "bc":
-            return seconds + offline_steps(spec) * self.rate("bc_step", spec.task)
-        return seconds + offline_steps(spec) * self.rate(
+            return seconds + steps * self.rate("bc_step", spec.task)
+        return seconds + steps * self.rate(
             "dt_step", spec.task, window_shape(spec.data.expert_ratio)
         )
 

@@ -52,6 +52,7 @@ class PlannedRun:
     state: str  # done / failed / missing / corrupt / waiting (before this sweep)
     problem: str | None
     estimate_seconds: float
+    done_steps: int = 0  # gradient steps its checkpoint on this machine holds already
 
 
 @dataclass
@@ -112,12 +113,16 @@ def plan(
     costs: CostModel | None = None,
     methods: Sequence[str] | None = None,
     task: str | None = None,
+    checkpoints: bool = True,
 ) -> tuple[list[PlannedRun], list[str]]:
     """Every run of the grid (of section `only`, of `methods`, of `task`) with its stored state
-    and estimated cost; warnings for files that are not trusted (corrupt results, JSON files of
-    no run of this grid)."""
+    and estimated cost, less the steps its checkpoint on this machine holds (without
+    `checkpoints`, as on a fresh machine); warnings for files that are not trusted (corrupt
+    results, JSON files of no run of this grid)."""
     if task is not None:
         get_task(task)  # an unknown task is refused, not read as an empty grid
+    from gcdt.experiments.artifacts import checkpointed_steps
+
     costs = costs or CostModel.measured(profile.name)
     planned, warnings, trained = [], [], set()
     for entry in build_grid(profile, only):
@@ -132,11 +137,15 @@ def plan(
         state, problem = stored.state, stored.problem
         if (agent := entry.spec.waits_for) and state != "done":
             state, problem = "waiting", f"{agent} (not published, or not of agent_steps)"
-        # Runs that share a checkpoint (the return-target study's) pay for training once.
+        # Runs that share a checkpoint (the return-target study's) pay for training once,
+        # and a checkpoint left here by a killed or finished run pays for the rest only.
         train = entry.spec.method == "tqc" or entry.spec.training_key() not in trained
         trained.add(entry.spec.training_key())
-        estimate = costs.estimate(entry.spec, train=train)
-        planned.append(PlannedRun(entry, key, state, problem, estimate))
+        done_steps = 0
+        if checkpoints and train and state != "done" and entry.spec.method != "tqc":
+            done_steps = checkpointed_steps(entry.spec)
+        estimate = costs.estimate(entry.spec, train=train, done_steps=done_steps)
+        planned.append(PlannedRun(entry, key, state, problem, estimate, done_steps))
     if only is None and methods is None and task is None:
         keys = {p.key for p in planned}
         warnings += [

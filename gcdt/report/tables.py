@@ -19,6 +19,7 @@ from gcdt import paper
 from gcdt.baselines.publish import AGENTS_DIR, agent_dirs, read_agent
 from gcdt.baselines.tqc_her import EVAL_CSV, RUN_JSON
 from gcdt.errors import GcdtError
+from gcdt.experiments.costs import CostModel
 from gcdt.experiments.grid import build_grid
 from gcdt.experiments.profiles import Profile
 from gcdt.experiments.store import RunStore
@@ -587,9 +588,12 @@ def progress(runs: pd.DataFrame, profile: Profile) -> tuple[int, int]:
 def sections_left(profile: Profile) -> pd.DataFrame:
     """Per section of `profile`'s grid, in its sweep's order: runs finished, runs planned, and
     the dry run's estimate of the hours the rest take (`gcdt sweep --dry-run`'s cost model,
-    measured from the published runs; collections excluded: what is missing depends on the
-    machine). Each run counts in the first of its sections, as the dry run counts it."""
-    planned, _ = plan(profile, RunStore(results_dir(profile.name) / "runs"))
+    measured from the published runs; collections, this CPU's speed and the checkpoints
+    here excluded: those depend on the machine, the report does not). Each run counts in the
+    first of its sections, as the dry run counts it."""
+    costs = CostModel.measured(profile.name, this_machine=False)
+    store = RunStore(results_dir(profile.name) / "runs")
+    planned, _ = plan(profile, store, costs=costs, checkpoints=False)
     rows: dict[str, dict] = {}
     for run in planned:
         row = rows.setdefault(

@@ -615,8 +615,10 @@ def test_a_checkpoint_left_here_counts_in_the_estimate(tmp_path, monkeypatch):
 
 def test_a_sweep_of_one_task_runs_its_runs_longest_first(capsys, monkeypatch, tmp_path):
     """`--task` keeps one task's runs (an unknown task is refused); the sweep hands them to the
-    backend longest first, so that no worker is left alone with a long run at the end."""
+    backend longest first, so that no worker is left alone with a long run at the end, after
+    the runs a killed sweep began."""
     from gcdt.cli import main
+    from gcdt.experiments.artifacts import checkpoint_dir
     from gcdt.experiments.costs import CostModel
     from gcdt.experiments.sweep import plan
 
@@ -640,6 +642,20 @@ def test_a_sweep_of_one_task_runs_its_runs_longest_first(capsys, monkeypatch, tm
     assert len(handed) == len(build_grid(TINY))
     assert costs == sorted(costs, reverse=True) and costs[0] > costs[-1]
     assert summary.rerun.endswith("--task reach")
+
+    # A run a killed sweep began (its checkpoint holds steps) goes first, however short its
+    # rest: finishing it writes the result that work is at risk for.
+    monkeypatch.setenv("GCDT_ARTIFACTS", str(tmp_path / "artifacts"))
+    begun = next(p.entry.spec for p in handed[1:] if p.entry.spec.method == "gcdt")
+    out = checkpoint_dir(begun)
+    out.mkdir(parents=True)
+    (out / "checkpoint.pt").write_bytes(b"stand-in")
+    (out / "train_log.csv").write_text(f"step,loss,lr,seconds\n{begun.train_steps - 1},0.5,0,1\n")
+    handed.clear()
+    sweep(TINY, store_root=tmp_path / "runs", task="reach", workers=1, progress=False)
+    assert handed[0].entry.spec == begun and handed[0].done_steps == begun.train_steps - 1
+    rest = [p.estimate_seconds for p in handed[1:]]
+    assert rest == sorted(rest, reverse=True) and handed[0].estimate_seconds < rest[0]
 
 
 def test_the_epoch_budget_is_estimated_from_the_collecting_policys_episode_length(

@@ -215,9 +215,9 @@ def sweep(
     store_root: str | Path | None = None,
     progress: bool = True,
 ) -> SweepSummary:
-    """Run every run of `profile` (of section `only`, of `methods`, of `task`) not done yet,
-    the longest first (by the estimate), so that no worker is left alone with a long run at the
-    end.
+    """Run every run of `profile` (of section `only`, of `methods`, of `task`) not done yet:
+    those a checkpoint on this machine has begun first, then the longest first (by the
+    estimate), so that no worker is left alone with a long run at the end.
 
     Bad input (backend, an unreachable `address`, a cluster too small for one run, a `storage`
     URI that cannot be written) is refused before anything is written.
@@ -245,7 +245,9 @@ def sweep(
     summary.waiting = [p.key for p in planned if p.state == "waiting"]
     summary.rerun = rerun_command(profile.name, backend, address, storage, retries, only, task)
     todo = [p for p in planned if p.state not in ("done", "waiting")]
-    todo.sort(key=lambda p: -p.estimate_seconds)  # stable: ties keep the grid's order
+    # Runs a killed sweep left a checkpoint of go first: that work is lost with the machine
+    # until their result is written. Then the longest first (stable: ties keep grid order).
+    todo.sort(key=lambda p: (p.done_steps == 0, -p.estimate_seconds))
     workers = workers or default_workers(profile)
     started = time.perf_counter()
     if todo:

@@ -504,6 +504,21 @@ print(summary.line())
 """
 
 
+def _pool_workers(pid: int) -> list[int]:
+    """The worker processes of the process pool of driver `pid` (its spawned children)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            ppid = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+            cmdline = stat.with_name("cmdline").read_bytes()
+        except (OSError, IndexError, ValueError):  # gone meanwhile
+            continue
+        if ppid == pid and b"spawn_main" in cmdline:
+            out.append(int(stat.parent.name))
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds the pool's workers in /proc")
 def test_killed_sweep_resumes_with_only_the_missing_runs(tmp_path):
     runs = tmp_path / "runs"
     env = {**os.environ, "GCDT_ARTIFACTS": str(tmp_path / "artifacts")}
@@ -520,16 +535,24 @@ def test_killed_sweep_resumes_with_only_the_missing_runs(tmp_path):
     assert 1 <= len(first) < 13
     for name in first:  # whatever was written is whole
         assert RunStore(runs).read(Path(name).stem).state == "done"
-    done = subprocess.run(
+    # The resuming sweep loses a worker too (killed, out of memory): its pool breaks, and the
+    # runs it held are tried again in a fresh pool instead of being recorded as failed.
+    resumed = subprocess.Popen(
         [sys.executable, "-c", DRIVER, str(runs)],
         cwd=repo,
         env=env,
-        capture_output=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
         text=True,
-        timeout=600,
     )
-    assert done.returncode == 0, done.stderr
-    assert f"{13 - len(first)} done, {len(first)} skipped, 0 failed" in done.stdout
+    deadline = time.monotonic() + 300
+    while not (workers := _pool_workers(resumed.pid)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.kill(workers[0], signal.SIGKILL)
+    out, err = resumed.communicate(timeout=600)
+    assert resumed.returncode == 0, err
+    left = 13 - len(first)
+    assert f"{left} done, {len(first)} skipped, 0 failed, {left} retried" in out
     assert {p.name: p.stat().st_mtime_ns for p in runs.glob("*.json") if p.name in first} == first
     assert not [p for p in runs.iterdir() if p.suffix != ".json"]  # no temp files left
 

@@ -16,9 +16,11 @@ when any run failed.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import shlex
+import signal
 import time
 from collections import Counter
 from collections.abc import Iterator, Sequence
@@ -326,44 +328,66 @@ def rerun_command(
 
 class LocalBackend:
     """Runs in local worker processes: `submit` each run, then iterate `results` as they
-    finish (more may be submitted meanwhile, e.g. retries)."""
+    finish (more may be submitted meanwhile, e.g. retries). A pool that loses a worker
+    (killed, out of memory) is replaced by a fresh one."""
 
     name = "local"
 
     def __init__(self, workers: int) -> None:
         self._artifacts = str(artifacts_dir())
-        # Spawned, not forked: workers start clean of the driver's torch threads and env state.
-        context = multiprocessing.get_context("spawn")
-        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
-        self._pending: dict[Future, PlannedRun] = {}
-        self._lost: list[PlannedRun] = []  # submitted after the pool broke
+        self._workers = workers
+        self._pool: ProcessPoolExecutor | None = None
+        self._pending: dict[Future, tuple[PlannedRun, ProcessPoolExecutor]] = {}
 
     def submit(self, run: PlannedRun) -> None:
         spec = run.entry.spec.to_dict()
-        try:
-            future = self._pool.submit(run_result, spec, self.name, artifacts_root=self._artifacts)
-        except BrokenProcessPool:
-            self._lost.append(run)
-        else:
-            self._pending[future] = run
+        for _ in range(2):  # a pool found broken here is replaced once
+            if self._pool is None:
+                # Spawned, not forked: workers start clean of the driver's torch threads.
+                context = multiprocessing.get_context("spawn")
+                self._pool = ProcessPoolExecutor(max_workers=self._workers, mp_context=context)
+            try:
+                future = self._pool.submit(
+                    run_result, spec, self.name, artifacts_root=self._artifacts
+                )
+            except BrokenProcessPool:
+                self._discard(self._pool)
+                continue
+            self._pending[future] = (run, self._pool)
+            return
+        raise BrokenProcessPool("a fresh local worker pool broke at once")
 
     def results(self) -> Iterator[tuple[PlannedRun, dict[str, Any]]]:
-        while self._pending or self._lost:
-            if self._lost:
-                run = self._lost.pop()
-                yield run, self._lost_result(run, "the local worker pool broke")
-                continue
+        while self._pending:
             finished, _ = wait(self._pending, return_when=FIRST_COMPLETED)
             for future in finished:
-                run = self._pending.pop(future)
+                run, pool = self._pending.pop(future)
                 try:
                     result = future.result()
-                except BrokenProcessPool:  # a worker died (killed, out of memory)
+                except BrokenProcessPool:
+                    # One dead worker fails every run its pool held, queued ones included:
+                    # each counts a try, and the sweep's retries run it in a fresh pool,
+                    # where a run that was training resumes from its checkpoint.
+                    self._discard(pool)
                     result = self._lost_result(run, "a local worker process died")
                 yield run, result
+
+    def _discard(self, pool: ProcessPoolExecutor) -> None:
+        """Stop broken `pool`: its surviving workers would run on (nothing before Python 3.14
+        stops them), beside the fresh pool's on the same runs, and keep the driver from
+        exiting. Their writes are atomic, so a kill leaves nothing half-written."""
+        if pool is not self._pool:
+            return  # stopped already
+        survivors = list(getattr(pool, "_processes", None) or {})  # no public handle
+        pool.shutdown(wait=False, cancel_futures=True)
+        for pid in survivors:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        self._pool = None
 
     def _lost_result(self, run: PlannedRun, why: str) -> dict[str, Any]:
         return lost_result(run.entry.spec.to_dict(), self.name, f"BrokenProcessPool: {why}", why)
 
     def close(self) -> None:
-        self._pool.shutdown(cancel_futures=True)
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)

@@ -340,22 +340,23 @@ class LocalBackend:
         self._pending: dict[Future, tuple[PlannedRun, ProcessPoolExecutor]] = {}
 
     def submit(self, run: PlannedRun) -> None:
-        spec = run.entry.spec.to_dict()
-        for _ in range(2):  # a pool found broken here is replaced once
-            if self._pool is None:
-                # Spawned, not forked: workers start clean of the driver's torch threads.
-                context = multiprocessing.get_context("spawn")
-                self._pool = ProcessPoolExecutor(max_workers=self._workers, mp_context=context)
-            try:
-                future = self._pool.submit(
-                    run_result, spec, self.name, artifacts_root=self._artifacts
-                )
-            except BrokenProcessPool:
-                self._discard(self._pool)
-                continue
-            self._pending[future] = (run, self._pool)
-            return
-        raise BrokenProcessPool("a fresh local worker pool broke at once")
+        args = (run_result, run.entry.spec.to_dict(), self.name)
+        pool = self._live_pool()
+        try:
+            future = pool.submit(*args, artifacts_root=self._artifacts)
+        except BrokenProcessPool:  # a worker died before `results` saw it
+            self._discard(pool)
+            pool = self._live_pool()
+            future = pool.submit(*args, artifacts_root=self._artifacts)
+        self._pending[future] = (run, pool)
+
+    def _live_pool(self) -> ProcessPoolExecutor:
+        """The pool runs go to, started afresh after a broken one was discarded."""
+        if self._pool is None:
+            # Spawned, not forked: workers start clean of the driver's torch threads.
+            context = multiprocessing.get_context("spawn")
+            self._pool = ProcessPoolExecutor(max_workers=self._workers, mp_context=context)
+        return self._pool
 
     def results(self) -> Iterator[tuple[PlannedRun, dict[str, Any]]]:
         while self._pending:

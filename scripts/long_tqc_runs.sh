@@ -14,9 +14,21 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT="${GCDT_ARTIFACTS:-artifacts}/long_tqc"
 STEPS="${GCDT_LONG_TQC_STEPS:-1000000}"   # a smaller value: a rehearsal of the whole script
+# Another config of gcdt/baselines/tqc_her.yaml trains a candidate beside the published agents:
+# its runs live in their own folders (NAME_CONFIG) and are never published over an agent by
+# this script (compare the curves, then `gcdt tqc publish OUT --replace` by hand).
+CONFIG="${GCDT_LONG_TQC_CONFIG:-cpu}"
 if [ "${1:-}" = "--snapshot" ]; then
   for out in "$ROOT"/*/; do
-    [ -f "$out/checkpoint.tqc" ] && .venv/bin/gcdt tqc snapshot "$out"
+    [ -f "$out/checkpoint.tqc" ] || continue
+    config=$(.venv/bin/python -c 'import sys
+from pathlib import Path
+from gcdt.baselines.tqc_checkpoint import read_header
+config = read_header(Path(sys.argv[1]))["config"]
+print(config["name"] if isinstance(config, dict) else config)' "$out/checkpoint.tqc")
+    where=()   # a candidate config's snapshot is named after its run folder, as below
+    [ "$config" = cpu ] || where=(--out "results/experts/in_progress/tqc_$(basename "$out")")
+    .venv/bin/gcdt tqc snapshot "$out" "${where[@]}"
   done
   exit 0
 fi
@@ -30,17 +42,25 @@ for run in "${runs[@]}"; do
   seed="${seed:-0}" name="${task}_${reward}"
   [ "$seed" = 0 ] || name="${name}_seed${seed}"
   out="$ROOT/$name" agent="results/experts/tqc_$name/run.json"         # finished and published
+  [ "$CONFIG" = cpu ] || out="$ROOT/${name}_$CONFIG"
   [ -f "$agent" ] && .venv/bin/python -c 'import json, sys
-sys.exit(json.load(open(sys.argv[1]))["env_steps"] < int(sys.argv[2]))' "$agent" "$STEPS" && continue
+run = json.load(open(sys.argv[1]))
+sys.exit(run["env_steps"] < int(sys.argv[2]) or run["config"]["name"] != sys.argv[3])' \
+    "$agent" "$STEPS" "$CONFIG" && continue
   if [ ! -f "$out/run.json" ]; then                                   # not finished here
     snapshot="results/experts/in_progress/tqc_${task}_${reward}_seed${seed}"
+    [ "$CONFIG" = cpu ] || snapshot="results/experts/in_progress/tqc_$(basename "$out")"
     if [ ! -f "$out/checkpoint.tqc" ] && [ -f "$snapshot/checkpoint.tqc" ]; then
       mkdir -p "$out" && cp "$snapshot"/* "$out"/
     fi
     resume=()
     [ -f "$out/checkpoint.tqc" ] && resume=(--resume)
-    .venv/bin/gcdt tqc train --task "$task" --reward "$reward" --config cpu --steps "$STEPS" \
+    .venv/bin/gcdt tqc train --task "$task" --reward "$reward" --config "$CONFIG" --steps "$STEPS" \
       --seed "$seed" --eval-every 25000 --eval-episodes 100 --out "$out" --no-progress "${resume[@]}"
+  fi
+  if [ "$CONFIG" != cpu ]; then
+    echo "long_tqc_runs: $out finished; compare it with $agent, then publish it by hand" >&2
+    continue
   fi
   # Publish it at once (replacing an agent of fewer steps, and the run's snapshot): the large
   # profile's runs that wait for it can start; commit results/experts/ afterwards.

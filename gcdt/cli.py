@@ -577,7 +577,8 @@ class TQCTrain(_Command, _Progress):
     out: Path = setting(REQUIRED, "the folder to write into", metavar="DIR")
     config: str = setting(
         "paper",
-        "paper: rl-baselines3-zoo her-defaults (GPU-scale); cpu: smaller nets and batches",
+        "paper: rl-baselines3-zoo her-defaults (GPU-scale); cpu: smaller nets and batches; "
+        "others: gcdt/baselines/tqc_her.yaml",
         choices=tqc_config_names,
     )
     steps: int | None = setting(None, "env steps (default: the config's)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -643,6 +644,55 @@ def test_agents_table_puts_each_published_agent_beside_the_papers_tqc_cell(tmp_p
     written = pd.read_csv(csv).set_index(["task", "reward"])
     assert written.loc[("push", "sparse"), "success"] == 90.0
     assert written.loc[("reach", "dense"), "status"] == "not yet published"
+
+
+def test_a_run_in_progress_is_shown_beside_the_published_agent_at_the_same_steps(
+    tmp_path, monkeypatch
+):
+    """A candidate's snapshot (`gcdt tqc snapshot`) is read from its checkpoint's header and
+    curve: its success at each budget it reached, and at its latest evaluation, beside the
+    published agent's of its task, reward and seed; curve points past the checkpoint (a
+    resume rewrites them) are left out."""
+    from gcdt.baselines.tqc_checkpoint import _write
+    from gcdt.report import agents
+
+    experts = tmp_path / "experts"
+    curve = [(100_000, 0.12), (250_000, 0.185), (275_000, 0.24), (500_000, 0.265)]
+    _agent(experts, "pick_and_place", "sparse", 1_000_000, curve, held_out=(0.46, -30.7, 500))
+    snapshot = experts / "in_progress" / "tqc_pick_and_place_sparse_cpu_zoo_batch"
+    snapshot.mkdir(parents=True)
+    config = {"name": "cpu_zoo_batch", "n_envs": 8}
+    header = {"task": "pick_and_place", "reward": "sparse", "seed": 0, "config": config}
+    _write(snapshot / "checkpoint.tqc", {**header, "env_steps": 280_000, "buffer": False}, {})
+    ahead = [(100_000, 0.3), (250_000, 0.5), (275_000, 0.55), (300_000, 0.9)]
+    rows = [f"{steps},1.0,1.0,{success},-10.0,100" for steps, success in ahead]
+    head = "env_steps,train_seconds,wall_seconds,success_rate,mean_return,episodes"
+    (snapshot / "eval.csv").write_text("\n".join([head, *rows]) + "\n")
+
+    (row,) = agents.in_progress_table(experts).to_dict("records")
+    assert (row["run"], row["config"], row["env_steps"]) == (
+        snapshot.name,
+        "cpu_zoo_batch",
+        280_000,
+    )
+    assert row["agent"] == "tqc_pick_and_place_sparse"
+    assert (row["success_100000"], row["agent_success_100000"]) == (30.0, 12.0)
+    assert (row["success_250000"], row["agent_success_250000"]) == (50.0, 18.5)
+    assert np.isnan(row["success_500000"]) and row["agent_success_500000"] == 26.5
+    assert row["latest_steps"] == 275_000  # 300,000 lies past the snapshot's 280,000
+    assert [row["success_latest"], row["agent_success_latest"]] == pytest.approx([55.0, 24.0])
+
+    monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path / "out"))
+    md, _ = report.write_agents_table(experts)
+    text = md.read_text()
+    assert "## Runs in progress" in text
+    assert (
+        f"| {snapshot.name} | cpu_zoo_batch | 280,000 | 275,000: 55.0 / 24.0 | 30.0 / 12.0 "
+        "| 50.0 / 18.5 | – / 26.5 | – / – |" in text.splitlines()
+    )
+    # Without a run in progress the section is left out.
+    shutil.rmtree(snapshot)
+    assert "Runs in progress" not in report.write_agents_table(experts)[0].read_text()
 
 
 def test_a_damaged_agent_record_is_refused_in_one_line(tmp_path):

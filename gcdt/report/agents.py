@@ -7,7 +7,9 @@ values and budget, and the agent's success at smaller budgets read from its lear
 (the periodic evaluations of training, on their own episodes). A cell without a published
 agent is a "not yet published" row, and an agent published without a held-out measurement
 (before `gcdt tqc publish`) shows its curve only. Written by `gcdt report` to
-`results/experts/table1_tqc.{md,csv}`.
+`results/experts/table1_tqc.{md,csv}`, followed by the runs in progress whose snapshots are
+committed (`in_progress_table`): each one's curve so far beside the published agent's at the
+same steps, the comparison a candidate config is judged by.
 """
 
 from __future__ import annotations
@@ -17,8 +19,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from gcdt.baselines.publish import AGENTS_DIR, HELD_OUT_SEED, read_agent
-from gcdt.baselines.tqc_her import RUN_JSON, load_tqc_config
+from gcdt.baselines.publish import AGENTS_DIR, HELD_OUT_SEED, SNAPSHOTS_DIR, read_agent
+from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE, read_header
+from gcdt.baselines.tqc_her import EVAL_CSV, RUN_JSON, load_tqc_config
 from gcdt.report.tables import PAPER_TABLE1, TASK_NAMES, aggregate, load_agent_curves
 
 #: The budgets (env steps) at which the learning curves are read, where they reach them.
@@ -167,5 +170,80 @@ def agents_markdown(table: pd.DataFrame) -> str:
         "several). Curve N: success % of training's periodic evaluation at N env steps (its "
         "own episodes), where the run reached N. Paper: Table 1's TQC+HER values and the "
         "budget of its config (`gcdt/baselines/tqc_her.yaml`, `paper`)."
+    )
+    return intro + "\n\n" + "\n".join(lines)
+
+
+def in_progress_table(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:
+    """One row per run snapshotted in `agents_dir`'s in_progress/ folder (`gcdt tqc snapshot`):
+    what it is (task, reward, seed, config), the env steps its snapshot holds, and at each
+    budget of `CURVE_BUDGETS` it has reached, and at its latest evaluation, its success (%)
+    beside that of the published agent of its task, reward and seed at the same steps (NaN
+    where that agent's curve has no evaluation there)."""
+    agents, curves = load_agents(agents_dir), load_agent_curves(agents_dir)
+    snapshots = Path(agents_dir) / SNAPSHOTS_DIR.name
+    rows = []
+    for checkpoint in sorted(snapshots.glob(f"*/{CHECKPOINT_FILE}")):
+        header = read_header(checkpoint)
+        n_envs, steps = header["config"]["n_envs"], header["env_steps"]
+        curve = pd.read_csv(checkpoint.parent / EVAL_CSV)
+        curve = curve[curve["env_steps"] < steps + n_envs]  # it may run ahead of the checkpoint
+        agent = agents[
+            (agents["task"] == header["task"])
+            & (agents["reward"] == header["reward"])
+            & (agents["seed"] == header["seed"])
+        ]
+        theirs = curves[curves["agent"].isin(agent["agent"])]
+        their_envs = int(agent["n_envs"].iloc[0]) if len(agent) else n_envs
+        row = {
+            "run": checkpoint.parent.name,
+            "task": header["task"],
+            "reward": header["reward"],
+            "seed": header["seed"],
+            "config": header["config"]["name"],
+            "env_steps": steps,
+            "agent": agent["agent"].iloc[0] if len(agent) else None,
+            "latest_steps": int(curve["env_steps"].iloc[-1]) if len(curve) else None,
+        }
+        for budget in CURVE_BUDGETS:
+            row[f"success_{budget}"] = _curve_success(curve, budget, n_envs)
+            row[f"agent_success_{budget}"] = _curve_success(theirs, budget, their_envs)
+        if len(curve):
+            # Either run's evaluation lands up to one loop iteration past the same mark.
+            last = curve.iloc[-1]
+            near = theirs[(theirs["env_steps"] - last["env_steps"]).abs() < max(n_envs, their_envs)]
+            row["success_latest"] = 100 * float(last["success_rate"])
+            row["agent_success_latest"] = (
+                100 * float(near["success_rate"].iloc[0]) if len(near) else np.nan
+            )
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def in_progress_markdown(table: pd.DataFrame) -> str:
+    """`in_progress_table` as a Markdown section ('' when no run is in progress)."""
+    if table.empty:
+        return ""
+
+    def pair(r: dict, name: str) -> str:
+        ours, theirs = r.get(f"success_{name}", np.nan), r.get(f"agent_success_{name}", np.nan)
+        return f"{_number(ours, '.1f')} / {_number(theirs, '.1f')}"
+
+    budgets = " | ".join(f"{_steps(b)}" for b in CURVE_BUDGETS)
+    lines = [
+        f"| Run | Config | Snapshot steps | Latest evaluation | {budgets} |",
+        "|---|---|---|---|" + "---|" * len(CURVE_BUDGETS),
+    ]
+    for r in table.to_dict("records"):
+        latest = "–" if pd.isna(r["latest_steps"]) else f"{int(r['latest_steps']):,}: "
+        if latest != "–":
+            latest += pair(r, "latest")
+        cells = " | ".join(pair(r, str(b)) for b in CURVE_BUDGETS)
+        lines.append(f"| {r['run']} | {r['config']} | {r['env_steps']:,} | {latest} | {cells} |")
+    intro = (
+        "## Runs in progress\n\n"
+        f"From the snapshots in `results/experts/{SNAPSHOTS_DIR.name}/` (`gcdt tqc snapshot`). "
+        "Success % of training's periodic evaluation: the run's / the published agent's of "
+        "the same task, reward and seed at the same env steps (– where either has none)."
     )
     return intro + "\n\n" + "\n".join(lines)

@@ -89,7 +89,9 @@ def write_agents_table(agents_dir: str | Path = AGENTS_DIR) -> list[Path]:
     written to results/experts/ under `outputs_root()`; the paths written."""
     out = outputs_root() / AGENTS_DIR.relative_to(REPO_ROOT)
     table = agents.agents_table(agents_dir)
-    files = {".md": agents.agents_markdown(table) + "\n", ".csv": _csv(table)}
+    running = agents.in_progress_markdown(agents.in_progress_table(agents_dir))
+    markdown = agents.agents_markdown(table) + (f"\n\n{running}" if running else "")
+    files = {".md": markdown + "\n", ".csv": _csv(table)}
     for suffix, text in files.items():
         write_if_changed(out / f"{AGENTS_TABLE}{suffix}", text)
     return [out / f"{AGENTS_TABLE}{suffix}" for suffix in files]

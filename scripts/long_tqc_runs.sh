@@ -43,9 +43,11 @@ for run in "${runs[@]}"; do
   [ "$seed" = 0 ] || name="${name}_seed${seed}"
   out="$ROOT/$name" agent="results/experts/tqc_$name/run.json"         # finished and published
   [ "$CONFIG" = cpu ] || out="$ROOT/${name}_$CONFIG"
+  # Done: an agent of STEPS published there (by a candidate config: that config's own).
   [ -f "$agent" ] && .venv/bin/python -c 'import json, sys
-run = json.load(open(sys.argv[1]))
-sys.exit(run["env_steps"] < int(sys.argv[2]) or run["config"]["name"] != sys.argv[3])' \
+run, steps, config = json.load(open(sys.argv[1])), int(sys.argv[2]), sys.argv[3]
+name = run.get("config", {}).get("name")
+sys.exit(run["env_steps"] < steps or (config != "cpu" and name != config))' \
     "$agent" "$STEPS" "$CONFIG" && continue
   if [ ! -f "$out/run.json" ]; then                                   # not finished here
     snapshot="results/experts/in_progress/tqc_${task}_${reward}_seed${seed}"

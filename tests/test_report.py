@@ -567,12 +567,12 @@ def test_online_offline_figure_keeps_each_training_budget_apart(tmp_path):
     np.testing.assert_allclose(np.asarray(rq4.get_ydata(), dtype=float), expected)
 
 
-def _agent(root, task, reward, env_steps, curve, held_out=None, n_envs=8):
+def _agent(root, task, reward, env_steps, curve, held_out=None, n_envs=8, seed=0):
     """A published agent's folder as `gcdt tqc publish` writes it (`held_out`: its held-out
     success and return; None: published before held-out measurements, without a record)."""
-    folder = root / f"tqc_{task}_{reward}"
+    folder = root / (f"tqc_{task}_{reward}" + (f"_seed{seed}" if seed else ""))
     folder.mkdir(parents=True)
-    record = {"task": task, "reward": reward, "seed": 0, "env_steps": env_steps}
+    record = {"task": task, "reward": reward, "seed": seed, "env_steps": env_steps}
     record["config"] = {"n_envs": n_envs}
     if held_out is not None:
         success, ret, episodes = held_out
@@ -646,52 +646,80 @@ def test_agents_table_puts_each_published_agent_beside_the_papers_tqc_cell(tmp_p
     assert written.loc[("reach", "dense"), "status"] == "not yet published"
 
 
+def _snapshot(experts, name, task, reward, seed, env_steps, curve):
+    """A run's snapshot as `gcdt tqc snapshot` keeps it: a checkpoint (its header is all the
+    table reads) and the curve so far."""
+    from gcdt.baselines.tqc_checkpoint import _write
+
+    folder = experts / "in_progress" / name
+    folder.mkdir(parents=True)
+    config = {"name": "cpu_zoo_batch", "n_envs": 8}
+    header = {"task": task, "reward": reward, "seed": seed, "config": config}
+    _write(folder / "checkpoint.tqc", {**header, "env_steps": env_steps, "buffer": False}, {})
+    rows = [f"{steps},1.0,1.0,{success},-10.0,100" for steps, success in curve]
+    head = "env_steps,train_seconds,wall_seconds,success_rate,mean_return,episodes"
+    (folder / "eval.csv").write_text("\n".join([head, *rows]) + "\n")
+    return folder
+
+
 def test_a_run_in_progress_is_shown_beside_the_published_agent_at_the_same_steps(
     tmp_path, monkeypatch
 ):
     """A candidate's snapshot (`gcdt tqc snapshot`) is read from its checkpoint's header and
     curve: its success at each budget it reached, and at its latest evaluation, beside the
-    published agent's of its task, reward and seed; curve points past the checkpoint (a
-    resume rewrites them) are left out."""
-    from gcdt.baselines.tqc_checkpoint import _write
+    published agent's of its task, reward and seed (not another seed's) within one loop
+    iteration of the same steps; curve points past the checkpoint (a resume rewrites them)
+    are left out."""
     from gcdt.report import agents
 
     experts = tmp_path / "experts"
     curve = [(100_000, 0.12), (250_000, 0.185), (275_000, 0.24), (500_000, 0.265)]
     _agent(experts, "pick_and_place", "sparse", 1_000_000, curve, held_out=(0.46, -30.7, 500))
-    snapshot = experts / "in_progress" / "tqc_pick_and_place_sparse_cpu_zoo_batch"
-    snapshot.mkdir(parents=True)
-    config = {"name": "cpu_zoo_batch", "n_envs": 8}
-    header = {"task": "pick_and_place", "reward": "sparse", "seed": 0, "config": config}
-    _write(snapshot / "checkpoint.tqc", {**header, "env_steps": 280_000, "buffer": False}, {})
-    ahead = [(100_000, 0.3), (250_000, 0.5), (275_000, 0.55), (300_000, 0.9)]
-    rows = [f"{steps},1.0,1.0,{success},-10.0,100" for steps, success in ahead]
-    head = "env_steps,train_seconds,wall_seconds,success_rate,mean_return,episodes"
-    (snapshot / "eval.csv").write_text("\n".join([head, *rows]) + "\n")
+    other_seed = [(100_000, 0.9), (250_000, 0.9), (275_000, 0.9), (500_000, 0.9)]
+    _agent(experts, "pick_and_place", "sparse", 1_000_000, other_seed, seed=1)
+    ahead = [(100_003, 0.3), (250_003, 0.5), (275_003, 0.55), (300_003, 0.9)]
+    candidate = "tqc_pick_and_place_sparse_cpu_zoo_batch"
+    _snapshot(experts, candidate, "pick_and_place", "sparse", 0, 280_000, ahead)
+    # Just begun, of a cell with no published agent: a row of its own, nothing to compare.
+    _snapshot(experts, "tqc_push_dense_cpu_zoo_batch", "push", "dense", 0, 6_968, [])
+    # A snapshot being written beside them (a killed `gcdt tqc snapshot` leaves one) is not
+    # a run in progress.
+    _snapshot(experts, ".tqc_push_dense.x1y2", "push", "dense", 0, 9_000, [])
 
-    (row,) = agents.in_progress_table(experts).to_dict("records")
-    assert (row["run"], row["config"], row["env_steps"]) == (
-        snapshot.name,
+    table = agents.in_progress_table(experts)
+    assert list(table["run"]) == [candidate, "tqc_push_dense_cpu_zoo_batch"]
+    row, fresh = table.to_dict("records")
+    assert (row["config"], row["env_steps"], row["agent"]) == (
         "cpu_zoo_batch",
         280_000,
+        "tqc_pick_and_place_sparse",
     )
-    assert row["agent"] == "tqc_pick_and_place_sparse"
-    assert (row["success_100000"], row["agent_success_100000"]) == (30.0, 12.0)
-    assert (row["success_250000"], row["agent_success_250000"]) == (50.0, 18.5)
+    assert [row["success_100000"], row["agent_success_100000"]] == pytest.approx([30.0, 12.0])
+    assert [row["success_250000"], row["agent_success_250000"]] == pytest.approx([50.0, 18.5])
     assert np.isnan(row["success_500000"]) and row["agent_success_500000"] == 26.5
-    assert row["latest_steps"] == 275_000  # 300,000 lies past the snapshot's 280,000
+    assert row["latest_steps"] == 275_003  # 300,003 lies past the snapshot's 280,000
     assert [row["success_latest"], row["agent_success_latest"]] == pytest.approx([55.0, 24.0])
+    assert pd.isna(fresh["agent"]) and pd.isna(fresh["latest_steps"])
+    assert all(np.isnan(fresh[f"agent_success_{b}"]) for b in agents.CURVE_BUDGETS)
 
     monkeypatch.setenv("GCDT_OUTPUTS", str(tmp_path / "out"))
     md, _ = report.write_agents_table(experts)
-    text = md.read_text()
-    assert "## Runs in progress" in text
+    lines = md.read_text().splitlines()
+    assert "## Runs in progress" in lines
     assert (
-        f"| {snapshot.name} | cpu_zoo_batch | 280,000 | 275,000: 55.0 / 24.0 | 30.0 / 12.0 "
-        "| 50.0 / 18.5 | – / 26.5 | – / – |" in text.splitlines()
+        f"| {candidate} | cpu_zoo_batch | 280,000 | 275,003: 55.0 / 24.0 | 30.0 / 12.0 "
+        "| 50.0 / 18.5 | – / 26.5 | – / – |" in lines
     )
-    # Without a run in progress the section is left out.
-    shutil.rmtree(snapshot)
+    assert (
+        "| tqc_push_dense_cpu_zoo_batch | cpu_zoo_batch | 6,968 | – | – / – | – / – "
+        in md.read_text()
+    )
+    # A snapshot without its curve is refused in one line; without runs in progress the
+    # section is left out.
+    (experts / "in_progress" / candidate / "eval.csv").unlink()
+    with pytest.raises(GcdtError, match=r"has a checkpoint but no eval.csv: snapshot the run"):
+        agents.in_progress_table(experts)
+    shutil.rmtree(experts / "in_progress")
     assert "Runs in progress" not in report.write_agents_table(experts)[0].read_text()
 
 

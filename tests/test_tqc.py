@@ -765,14 +765,27 @@ def test_tqc_publish_replace_swaps_the_old_agent_for_the_new_one_whole(
     snapshot = out.parent / "in_progress" / f"tqc_push_sparse_seed{seed}"
     snapshot.mkdir(parents=True)
     (snapshot / "checkpoint.tqc").write_text("x")
+    # So does a candidate config's, named after the run's folder, when its header is this
+    # run's; one of another config under that name would stay.
+    from gcdt.baselines.tqc_checkpoint import _write
+
+    run_record = json.loads((push_run.out_dir / "run.json").read_text())
+    candidate = out.parent / "in_progress" / f"tqc_{push_run.out_dir.name}"
+    candidate.mkdir()
+    header = {"task": "push", "reward": "sparse", "seed": seed, "env_steps": 8}
+    header["config"] = {"name": "elsewhere"}
+    _write(candidate / "checkpoint.tqc", header, {})
+    assert publish._snapshot_of(candidate) == ("push", "sparse", seed, "elsewhere")
+    header["config"] = {"name": run_record["config"]["name"]}
+    _write(candidate / "checkpoint.tqc", header, {})
     before = _unchanged(out)
     with monkeypatch.context() as m:
         m.setattr(publish, "_measure", lambda *a, **k: 1 / 0)
         with pytest.raises(ZeroDivisionError):
             main(argv)
-    assert _unchanged(out) == before and snapshot.exists()
+    assert _unchanged(out) == before and snapshot.exists() and candidate.exists()
     assert main(argv) == 0
-    assert not snapshot.exists()
+    assert not snapshot.exists() and not candidate.exists()
     assert f"on 3 held-out episodes: {out}" in capsys.readouterr().out
     assert sorted(p.name for p in out.iterdir()) == ["eval.csv", "model.zip", "run.json"]
     record = json.loads((out / "run.json").read_text())

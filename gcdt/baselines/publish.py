@@ -174,8 +174,8 @@ def publish_agent(
     """Publish the finished run in `run` (default folder: `agent_dir(task, reward, seed)`);
     returns the folder. An agent already there is refused unless `replace` (of the same task,
     reward and seed); it is then swapped for the new one whole. The run's snapshot beside the
-    agents (`snapshot_dir` under out's folder), if one is kept, is removed: the run is
-    finished."""
+    agents (`snapshot_dir` under out's folder, or one named after the run's folder), if one
+    is kept, is removed: the run is finished."""
     run = Path(run)
     record = _finished_run(run)
     task, reward, seed = record["task"], record["reward"], record["seed"]
@@ -208,9 +208,22 @@ def publish_agent(
         write_json_atomic(staging / RUN_JSON, {**record, "curve": curve, "published": published})
     snapshots = out.parent / SNAPSHOTS_DIR.name
     shutil.rmtree(snapshot_dir(task, reward, seed, snapshots), ignore_errors=True)
+    # A candidate config's snapshot is named after its run's folder (scripts/long_tqc_runs.sh).
+    named = snapshots / f"tqc_{run.name}"
+    if _snapshot_of(named) == (task, reward, seed, record.get("config", {}).get("name")):
+        shutil.rmtree(named)
     with suppress(OSError):
         snapshots.rmdir()  # the last run in progress is finished: no empty folder is left
     return out
+
+
+def _snapshot_of(folder: Path) -> tuple[str, str, int, str] | None:
+    """Task, reward, seed and config name of the snapshot in `folder`; None if none is."""
+    try:
+        header = read_header(folder / CHECKPOINT_FILE)
+    except GcdtError:
+        return None
+    return (*_run_of(header), header["config"]["name"])
 
 
 def snapshot_dir(task: str, reward: str, seed: int, root: str | Path = SNAPSHOTS_DIR) -> Path:

@@ -7,9 +7,9 @@ values and budget, and the agent's success at smaller budgets read from its lear
 (the periodic evaluations of training, on their own episodes). A cell without a published
 agent is a "not yet published" row, and an agent published without a held-out measurement
 (before `gcdt tqc publish`) shows its curve only. Written by `gcdt report` to
-`results/experts/table1_tqc.{md,csv}`, followed by the runs in progress whose snapshots are
-committed (`in_progress_table`): each one's curve so far beside the published agent's at the
-same steps, the comparison a candidate config is judged by.
+`results/experts/table1_tqc.{md,csv}`. The Markdown goes on with the runs in progress whose
+snapshots are committed (`in_progress_table`): each one's curve so far beside the published
+agent's at the same steps, the comparison a candidate config is judged by.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import pandas as pd
 from gcdt.baselines.publish import AGENTS_DIR, HELD_OUT_SEED, SNAPSHOTS_DIR, read_agent
 from gcdt.baselines.tqc_checkpoint import CHECKPOINT_FILE, read_header
 from gcdt.baselines.tqc_her import EVAL_CSV, RUN_JSON, load_tqc_config
+from gcdt.errors import GcdtError
 from gcdt.report.tables import PAPER_TABLE1, TASK_NAMES, aggregate, load_agent_curves
 
 #: The budgets (env steps) at which the learning curves are read, where they reach them.
@@ -184,8 +185,15 @@ def in_progress_table(agents_dir: str | Path = AGENTS_DIR) -> pd.DataFrame:
     snapshots = Path(agents_dir) / SNAPSHOTS_DIR.name
     rows = []
     for checkpoint in sorted(snapshots.glob(f"*/{CHECKPOINT_FILE}")):
-        header = read_header(checkpoint)
+        if checkpoint.parent.name.startswith("."):
+            continue  # a snapshot being written (or left half-built by a kill), not one kept
+        header = read_header(checkpoint)  # a damaged snapshot: one line naming it
         n_envs, steps = header["config"]["n_envs"], header["env_steps"]
+        if not (checkpoint.parent / EVAL_CSV).is_file():
+            raise GcdtError(
+                f"{checkpoint.parent} has a checkpoint but no {EVAL_CSV}: snapshot the run "
+                "again (gcdt tqc snapshot), or remove the folder"
+            )
         curve = pd.read_csv(checkpoint.parent / EVAL_CSV)
         curve = curve[curve["env_steps"] < steps + n_envs]  # it may run ahead of the checkpoint
         agent = agents[

@@ -755,7 +755,12 @@ class Sweep(_Command, _Progress):
         from gcdt.experiments import plan, results_dir
         from gcdt.experiments.costs import CostModel
         from gcdt.experiments.store import RunStore
-        from gcdt.experiments.sweep import default_workers, section_costs, shared_cost
+        from gcdt.experiments.sweep import (
+            default_workers,
+            section_costs,
+            shared_cost,
+            wall_estimate,
+        )
 
         # Reads the bench JSON and the results once.
         costs = CostModel.measured(profile.name, on=self.estimate_on)
@@ -789,7 +794,8 @@ class Sweep(_Command, _Progress):
             agents = sorted({p.problem for p in waiting})
             print(f"{len(waiting)} of them wait for published agents: {'; '.join(agents)}")
         total = sum(p.estimate_seconds for p in todo) + shared
-        spread = f"{total / 3600 / workers:.1f} h on {workers} worker(s) (estimate)"
+        wall = wall_estimate(todo, workers, shared)
+        spread = f"{wall / 3600:.1f} h on {workers} worker(s) (estimate)"
         if costs.gpu:  # runs on one GPU share it rather than add up
             spread = f"one run after another on one {costs.gpu} (estimate)"
         print(

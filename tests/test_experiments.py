@@ -636,6 +636,29 @@ def test_a_checkpoint_left_here_counts_in_the_estimate(tmp_path, monkeypatch):
     assert estimate((1, 2, steps)) == (pytest.approx(costs.estimate(spec, train=False)), steps)
 
 
+def test_the_wall_estimate_hands_runs_out_as_the_sweep_does():
+    """On N workers a sweep takes at least its longest run, not the total over N: runs go out
+    begun first, then longest first, each to the worker free first."""
+    from types import SimpleNamespace
+
+    from gcdt.experiments.sweep import dispatch_order, wall_estimate
+
+    def runs(*seconds, begun=()):
+        return [
+            SimpleNamespace(estimate_seconds=s, done_steps=int(i in begun))
+            for i, s in enumerate(seconds)
+        ]
+
+    assert wall_estimate(runs(10, 1, 1), workers=2) == 10  # not (10 + 1 + 1) / 2
+    assert wall_estimate(runs(3, 3, 2, 2, 2), workers=2) == 7  # 3+2+2 beside 3+2
+    assert wall_estimate(runs(3, 3, 2, 2, 2), workers=5) == 3
+    assert wall_estimate(runs(4), workers=2, shared=6) == 7  # the data first, on both
+    # A begun run goes out first, so here the long one waits for a free worker.
+    begun = runs(1, 1, 6, begun=(0, 1))
+    assert [p.estimate_seconds for p in dispatch_order(begun)] == [1, 1, 6]
+    assert wall_estimate(begun, workers=2) == 7
+
+
 def test_a_sweep_of_one_task_runs_its_runs_longest_first(capsys, monkeypatch, tmp_path):
     """`--task` keeps one task's runs (an unknown task is refused); the sweep hands them to the
     backend longest first, so that no worker is left alone with a long run at the end, after

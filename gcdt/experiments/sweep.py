@@ -199,6 +199,24 @@ def section_costs(todo: list[PlannedRun]) -> dict[str, tuple[int, int, float]]:
     return out
 
 
+def dispatch_order(todo: list[PlannedRun]) -> list[PlannedRun]:
+    """The order a sweep hands `todo` out in. Runs a killed sweep left a checkpoint of go
+    first: that work is lost with the machine until their result is written. Then the longest
+    first (stable: ties keep grid order), so no worker is left alone with a long run at the
+    end."""
+    return sorted(todo, key=lambda p: (p.done_steps == 0, -p.estimate_seconds))
+
+
+def wall_estimate(todo: list[PlannedRun], workers: int, shared: float = 0.0) -> float:
+    """Estimated wall seconds of `todo` on `workers` local workers: the `shared` work (data,
+    experts) spread over them, then each run, in the sweep's order, to the worker free first.
+    A run is never split, so one long run bounds it however many workers there are."""
+    loads = [shared / workers] * workers
+    for p in dispatch_order(todo):
+        loads[loads.index(min(loads))] += p.estimate_seconds
+    return max(loads)
+
+
 def default_workers(profile: Profile) -> int:
     return max(1, (os.cpu_count() or 1) // profile.cpus_per_run)
 
@@ -246,10 +264,7 @@ def sweep(
     summary.skipped = [p.key for p in planned if p.state == "done"]
     summary.waiting = [p.key for p in planned if p.state == "waiting"]
     summary.rerun = rerun_command(profile.name, backend, address, storage, retries, only, task)
-    todo = [p for p in planned if p.state not in ("done", "waiting")]
-    # Runs a killed sweep left a checkpoint of go first: that work is lost with the machine
-    # until their result is written. Then the longest first (stable: ties keep grid order).
-    todo.sort(key=lambda p: (p.done_steps == 0, -p.estimate_seconds))
+    todo = dispatch_order([p for p in planned if p.state not in ("done", "waiting")])
     workers = workers or default_workers(profile)
     started = time.perf_counter()
     if todo:

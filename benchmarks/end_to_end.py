@@ -27,7 +27,7 @@ from common import write_report
 from gcdt.experiments import get_profile, plan
 from gcdt.experiments.costs import CostModel
 from gcdt.experiments.store import RunStore
-from gcdt.experiments.sweep import default_workers, shared_cost
+from gcdt.experiments.sweep import default_workers, shared_cost, wall_estimate
 from gcdt.paths import ARTIFACTS_ENV, REPO_ROOT, results_dir
 
 
@@ -63,7 +63,8 @@ def quick_costs() -> dict[str, Any]:
         if stored.state == "done":
             seconds = stored.result["execution"]["seconds"]["total_seconds"]
             measured[f"{p.entry.spec.method} {p.entry.spec.task}"].append(seconds)
-    work = sum(p.estimate_seconds for p in planned) + shared_cost(planned, costs)
+    shared = shared_cost(planned, costs)
+    work = sum(p.estimate_seconds for p in planned) + shared
     workers = default_workers(profile)
     return {
         "runs": len(planned),
@@ -71,7 +72,7 @@ def quick_costs() -> dict[str, Any]:
         "measured_seconds_per_run": {k: round(median(v), 1) for k, v in measured.items()},
         "measured_runs": sum(len(v) for v in measured.values()),
         "estimated_work_hours": round(work / 3600, 2),
-        "estimated_wall_hours": round(work / 3600 / workers, 2),
+        "estimated_wall_hours": round(wall_estimate(planned, workers, shared) / 3600, 2),
         "workers": workers,
     }
 

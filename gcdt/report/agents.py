@@ -243,9 +243,8 @@ def in_progress_markdown(table: pd.DataFrame) -> str:
         "|---|---|---|---|" + "---|" * len(CURVE_BUDGETS),
     ]
     for r in table.to_dict("records"):
-        latest = "–" if pd.isna(r["latest_steps"]) else f"{int(r['latest_steps']):,}: "
-        if latest != "–":
-            latest += pair(r, "latest")
+        steps = r["latest_steps"]
+        latest = "–" if pd.isna(steps) else f"{int(steps):,}: {pair(r, 'latest')}"
         cells = " | ".join(pair(r, str(b)) for b in CURVE_BUDGETS)
         lines.append(f"| {r['run']} | {r['config']} | {r['env_steps']:,} | {latest} | {cells} |")
     intro = (
